@@ -1,0 +1,1 @@
+"""Example scenes, shipped as the built-in scenes of `vibinverse demo` (package data)."""

@@ -1,0 +1,11 @@
+"""forward: scene (surfaces, materials, motions, sun, sensor) -> pixel intensity series.
+
+Never imports `vibinverse`.
+"""
+
+from forward.errors import SceneError
+from forward.render import pixel_signal, sensitivity
+from forward.scene_file import load_scene, scene_from_table
+from forward.sensor import Observation, observe
+
+__all__ = ["SceneError", "load_scene", "scene_from_table", "observe", "Observation", "pixel_signal", "sensitivity"]

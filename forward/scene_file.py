@@ -1,0 +1,149 @@
+"""Scene files (TOML): read, override by dotted key, validate into a `Scene`.
+
+Every numeric value may be a number or a string expression such as "pi/3 + 0.015". Units: SI,
+angles in rad, frequencies in Hz. The README documents the schema.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from forward.errors import SceneError
+from forward.materials import Fresnel, material_from_spec
+from forward.motion import MOTION_KINDS
+from forward.polarizer import Polarizer
+from forward.scene import Footprint, Noise, Sampling, Scene, Sensor, Sun, Surface
+from forward.validation import Table
+
+MAX_SAMPLES = 100_000_000
+_INCLINATION = {"lo": 0.0, "hi": math.pi / 2, "lo_open": True}
+_POSITIVE = {"lo": 0.0, "lo_open": True}
+
+
+def read_table(path: str | Path) -> dict[str, Any]:
+    """The raw TOML table of a scene file."""
+    p = Path(path)
+    try:
+        with p.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise SceneError(f"scene: file not found: {p}") from None
+    except IsADirectoryError:
+        raise SceneError(f"scene: {p} is a directory, not a scene file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"scene: {p} is not valid TOML: {exc}") from None
+
+
+def apply_overrides(table: dict[str, Any], overrides: list[str] | tuple[str, ...]) -> dict[str, Any]:
+    """A copy of `table` with each "dotted.key=value" applied; value is read as TOML (a bare word is a string)."""
+    out = copy.deepcopy(table)
+    for item in overrides:
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or not key or any(not part for part in key.split(".")):
+            raise SceneError(f"--set: expected dotted.key=value, got {item!r}")
+        value = parse_value(text.strip())
+        node = out
+        parts = key.split(".")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                raise SceneError(f"--set {key}: {part} is a value, not a table")
+        node[parts[-1]] = value
+    return out
+
+
+def parse_value(text: str) -> Any:
+    """A TOML value ("1e-3", "[0, 25]", "true", "'p'"), else the text itself as a string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def load_scene(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> tuple[Scene, dict[str, Any]]:
+    """(Scene, the table it was built from, overrides applied)."""
+    table = apply_overrides(read_table(path), overrides)
+    return scene_from_table(table), table
+
+
+def scene_from_table(data: dict[str, Any]) -> Scene:
+    """Validate a scene table into a `Scene`; a SceneError names the first bad key."""
+    top = Table(data, "")
+    top.raw("title", "")
+    sun = _sun(top.table("sun"))
+    sensor = _sensor(top.table("sensor"))
+    sampling = _sampling(top.table("sampling"))
+    noise = _noise(top.table("noise", required=False))
+    footprint = _footprint(top.table("footprint"))
+    background = _surface(top.table("background", required=False) or Table({}, "background"), "background",
+                          footprint.x, footprint.y, allow_motion=False)
+    surfaces_table = top.table("surfaces", required=False) or Table({}, "surfaces")
+    surfaces = []
+    for name in list(surfaces_table.data):
+        t = surfaces_table.table(name)
+        surfaces.append(_surface(t, name, t.interval("x"), t.interval("y"), allow_motion=True))
+    surfaces_table.done()
+    top.done()
+    for s in surfaces:
+        if s.motion is not None and s.motion.max_frequency() >= sampling.fs / 2:
+            raise SceneError(f"surfaces.{s.name}.motion.frequency: {s.motion.max_frequency():g} Hz is at or above "
+                             f"the Nyquist frequency {sampling.fs / 2:g} Hz; allowed range (0, fs/2)")
+    return Scene(sun, sensor, footprint, tuple(surfaces), background, sampling, noise)
+
+
+def _sun(t: Table) -> Sun:
+    sun = Sun(t.number("inclination", **_INCLINATION), t.number("azimuth"),
+              t.number("irradiance", 1.0, **_POSITIVE))
+    t.done()
+    return sun
+
+
+def _sensor(t: Table) -> Sensor:
+    sensor = Sensor(t.number("inclination", **_INCLINATION), t.number("azimuth"),
+                    Polarizer.parse(t.raw("polarizer", "none"), t.path("polarizer")),
+                    t.choice("radiometry", "projected", ("projected", "paper")))
+    t.done()
+    return sensor
+
+
+def _sampling(t: Table) -> Sampling:
+    s = Sampling(t.number("fs", **_POSITIVE), t.number("duration", **_POSITIVE), t.number("start", 0.0))
+    if not 2 <= s.n_samples <= MAX_SAMPLES:
+        raise SceneError(f"sampling: duration * fs = {s.n_samples} samples; allowed range [2, {MAX_SAMPLES}]")
+    t.done()
+    return s
+
+
+def _noise(t: Table | None) -> Noise:
+    if t is None:
+        return Noise()
+    n = Noise(t.number("sigma", 0.0, lo=0.0), t.number("photons_per_unit", 0.0, lo=0.0),
+              t.integer("adc_bits", 0, 0, 32), t.number("adc_full_scale", 0.0, lo=0.0))
+    t.done()
+    return n
+
+
+def _footprint(t: Table) -> Footprint:
+    f = Footprint(t.interval("x"), t.interval("y"), t.integer("resolution", 128, 1, 4096))
+    t.done()
+    return f
+
+
+def _surface(t: Table, name: str, x: tuple[float, float], y: tuple[float, float], allow_motion: bool) -> Surface:
+    material = material_from_spec(t.raw("material", "ground"), t.path("material"))
+    lobe = None
+    if isinstance(material, Fresnel):
+        lobe = t.number("lobe_width", lo=0.0, hi=0.5, lo_open=True)
+    motion = None
+    mt = t.table("motion", required=False) if allow_motion else None
+    if mt is not None:
+        kind = mt.choice("kind", None, tuple(MOTION_KINDS))
+        motion = MOTION_KINDS[kind](mt, x, y)
+        mt.done()
+    t.done()
+    return Surface(name, x, y, material, lobe, motion)

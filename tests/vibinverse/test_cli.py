@@ -1,0 +1,86 @@
+"""The command line as a user meets it: outputs, one-line errors, exit code 2, no partial files."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from tests.conftest import SCENES
+
+ROOF = str(SCENES / "roof_elastic.toml")
+FAST = ["--set", "footprint.resolution=32", "--set", "sampling.duration=0.1"]
+
+
+def run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "vibinverse", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def read_csv(path):
+    lines = path.read_text().splitlines()
+    comments = [ln for ln in lines if ln.startswith("#")]
+    header = lines[len(comments)]
+    return comments, header, np.loadtxt(path, delimiter=",", comments="#", skiprows=len(comments) + 1)
+
+
+def test_simulate_writes_series_truth_and_plot(tmp_path):
+    out, png = tmp_path / "roof.csv", tmp_path / "roof.png"
+    r = run("simulate", ROOF, *FAST, "--seed", "7", "-o", str(out), "--plot", str(png))
+    assert r.returncode == 0, r.stderr
+    assert "sensitivity S =" in r.stdout
+    comments, header, data = read_csv(out)
+    assert header == "time,intensity,intensity_clean"
+    assert data.shape == (100, 3)
+    assert any(c.startswith("# scene: {") and '"center_deflection":0.001' in c for c in comments)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    s = float(r.stdout.split("S =")[1].split()[0])
+    assert s == pytest.approx((data[:, 2].max() - data[:, 2].min()) / data[:, 2].max(), rel=1e-3)
+
+
+def test_seed_reproduces_and_set_overrides(tmp_path):
+    a, b, c = (tmp_path / f"{n}.csv" for n in "abc")
+    for path, seed in ((a, "1"), (b, "1")):
+        assert run("simulate", ROOF, *FAST, "--seed", seed, "-o", str(path)).returncode == 0
+    assert a.read_text() == b.read_text()
+    r = run("simulate", ROOF, *FAST, "--set", "surfaces.roof.motion.frequency=25", "-o", str(c))
+    assert r.returncode == 0
+    _, _, data = read_csv(c)
+    spec = np.abs(np.fft.rfft(data[:, 2] - data[:, 2].mean()))
+    assert np.fft.rfftfreq(data.shape[0], 1e-3)[spec.argmax()] == pytest.approx(25.0, abs=10.0)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--set", "sensr.inclination=1"], "sensr: unknown key"),
+    (["--set", "surfaces.roof.x=[25, -25]"], "surfaces.roof.x"),
+    (["--set", "sun.inclination=2"], "sun.inclination"),
+    (["--set", "surfaces.roof.lobe_width=0"], "surfaces.roof.lobe_width"),
+    (["--set", "noise.sigma=nan"], "noise.sigma"),
+    (["--set", "noise.sigma"], "dotted.key=value"),
+    (["--seed", "x"], "invalid int value"),
+])
+def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, args, message):
+    out = tmp_path / "out.csv"
+    r = run("simulate", ROOF, *args, "-o", str(out))
+    assert r.returncode == 2
+    assert message in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_missing_scene_and_unwritable_output(tmp_path):
+    r = run("simulate", str(tmp_path / "nope.toml"), "-o", str(tmp_path / "o.csv"))
+    assert r.returncode == 2 and "file not found" in r.stderr and "Traceback" not in r.stderr
+    r = run("simulate", ROOF, *FAST, "-o", str(tmp_path / "no" / "such" / "dir.csv"))
+    assert r.returncode == 2 and "cannot write" in r.stderr and "Traceback" not in r.stderr
+    # a good CSV with an unwritable plot: neither file is left behind
+    r = run("simulate", ROOF, *FAST, "-o", str(tmp_path / "ok.csv"), "--plot", str(tmp_path / "nodir" / "p.png"))
+    assert r.returncode == 2 and list(tmp_path.iterdir()) == []
+
+
+def test_version_and_demo(tmp_path):
+    r = run("--version")
+    assert r.returncode == 0 and r.stdout.startswith("vibinverse ")
+    r = run("demo", "-o", str(tmp_path / "demo"))
+    assert r.returncode == 0, r.stderr
+    assert "sensitivity S =" in r.stdout
+    assert (tmp_path / "demo" / "roof_elastic.csv").exists() and (tmp_path / "demo" / "roof_elastic.png").exists()

@@ -1,0 +1,50 @@
+"""Writing result files all-or-nothing: a failed run leaves no partial file behind."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+from forward.errors import SceneError
+
+
+@contextlib.contextmanager
+def staged(paths: list[Path]) -> Iterator[list[Path]]:
+    """Yield temporary paths beside `paths`; on success move them all into place, else delete them.
+
+    Raises SceneError (one line) when a destination's directory is missing or not writable.
+    """
+    temps: list[Path] = []
+    try:
+        for p in paths:
+            try:
+                fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
+            except OSError as exc:
+                raise SceneError(f"output: cannot write {p}: {exc.strerror or exc}") from None
+            os.close(fd)
+            os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results should be readable like any file
+            temps.append(Path(tmp))
+        yield temps
+        for tmp, p in zip(temps, paths):
+            os.replace(tmp, p)
+        temps = []
+    finally:
+        for tmp in temps:
+            tmp.unlink(missing_ok=True)
+
+
+def write_all(writers: dict[Path, Callable[[Path], None]]) -> None:
+    """Run each writer on a temporary file, then move every file into place together."""
+    targets = list(writers)
+    with staged(targets) as temps:
+        for tmp, target in zip(temps, targets):
+            writers[target](tmp)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
