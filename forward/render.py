@@ -17,12 +17,16 @@ from forward.scene import Scene
 _CHUNK_ELEMENTS = 1 << 21  # facets per vectorized block (~16 MB per temporary)
 
 
-def pixel_signal(scene: Scene, t: ArrayLike | None = None) -> NDArray[np.float64]:
+def pixel_signal(scene: Scene, t: ArrayLike | None = None, seed: int | np.random.SeedSequence | None = None
+                 ) -> NDArray[np.float64]:
     """Noise-free x(t) = (1/N) sum_k B_k w_k over the N footprint subpixels, eq. (22), times irradiance.
 
-    `t` defaults to the scene's sampling times.
+    `t` defaults to the scene's sampling times; `seed` fixes the realization of random motions
+    (e.g. the frame's white-noise forcing), one independent stream per surface.
     """
     t = scene.sampling.times() if t is None else np.asarray(t, dtype=float)
+    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    streams = root.spawn(len(scene.surfaces))
     x, y = scene.footprint.subpixels()
     owner = scene.owners(x, y)
     sun = scene.sun.direction
@@ -35,9 +39,10 @@ def pixel_signal(scene: Scene, t: ArrayLike | None = None) -> NDArray[np.float64
         if surface.motion is None:
             total += idx.size * float(facet_signal(flat, surface, sun, scene.sensor))
             continue
+        motion = surface.motion.prepare(t, np.random.default_rng(streams[k]))
         step = max(1, _CHUNK_ELEMENTS // idx.size)
         for a in range(0, t.size, step):
-            gx, gy = surface.motion.slopes(x[idx], y[idx], t[a:a + step])
+            gx, gy = motion.slopes(x[idx], y[idx], t[a:a + step])
             total[a:a + step] += facet_signal(normals_from_slopes(gx, gy), surface, sun, scene.sensor).sum(axis=1)
     return scene.sun.irradiance * total / x.size
 

@@ -35,8 +35,9 @@ def add_noise(clean: NDArray[np.float64], noise: Noise, rng: np.random.Generator
 
 
 def observe(scene: Scene, seed: int | None = None) -> Observation:
-    """Simulate the pixel series of `scene`; `seed` makes the noise reproducible."""
+    """Simulate the pixel series of `scene`; `seed` makes the motion's and the sensor's noise reproducible."""
     t = scene.sampling.times()
-    clean = pixel_signal(scene, t)
-    noisy = add_noise(clean, scene.noise, np.random.default_rng(seed))
+    motion_seed, sensor_seed = np.random.SeedSequence(seed).spawn(2)
+    clean = pixel_signal(scene, t, motion_seed)
+    noisy = add_noise(clean, scene.noise, np.random.default_rng(sensor_seed))
     return Observation(t, noisy, clean, sensitivity(clean))

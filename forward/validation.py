@@ -107,6 +107,13 @@ class Table:
             value = expression(value, self.path(name))
         return number(value, self.path(name), lo, hi, lo_open, hi_open)
 
+    def numbers(self, name: str, default: object = _REQUIRED, **bounds) -> list[float]:
+        """A number or a list of numbers (each may be an expression), as a list."""
+        value = self.raw(name, default)
+        items = value if isinstance(value, list) else [value]
+        sub = Table({f"{name}[{i}]": v for i, v in enumerate(items)}, self.key)
+        return [sub.number(f"{name}[{i}]", **bounds) for i in range(len(items))]
+
     def integer(self, name: str, default: object, lo: int, hi: int) -> int:
         return integer(self.raw(name, default), self.path(name), lo, hi)
 

@@ -61,6 +61,19 @@ def cmd_demo(args: argparse.Namespace) -> None:
     print(f"wrote {csv} and {png}")
 
 
+def cmd_study(args: argparse.Namespace) -> None:
+    from vibinverse.studies import STUDIES
+
+    out = Path(args.output)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SceneError(f"-o: cannot create directory {out}: {exc.strerror or exc}") from None
+    names = list(STUDIES) if args.name == "all" else [args.name]
+    for name in names:
+        print(STUDIES[name][0](out))
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="vibinverse", description="Passive optical vibrometry: simulate and invert pixel intensity series.")
     p.add_argument("--version", action="version", version=f"vibinverse {__version__}")
@@ -74,6 +87,14 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("-o", "--output", required=True, help="output CSV: time,intensity,intensity_clean")
     sim.add_argument("--plot", help="also write a PNG of the series and its spectrum")
     sim.set_defaults(func=cmd_simulate)
+
+    from vibinverse.studies import STUDIES
+
+    study = sub.add_parser("study", help="reproduce a figure of the paper",
+                           description="Studies: " + "; ".join(f"{k}: {v[1]}" for k, v in STUDIES.items()))
+    study.add_argument("name", choices=[*STUDIES, "all"], help="figure to reproduce, or all")
+    study.add_argument("-o", "--output", default="studies", help="output directory (default: studies)")
+    study.set_defaults(func=cmd_study)
 
     demo = sub.add_parser("demo", help="run the main job on a built-in scene")
     demo.add_argument("-o", "--output", default="vibinverse-demo", help="output directory (default: vibinverse-demo)")

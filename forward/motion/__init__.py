@@ -1,10 +1,13 @@
 """Surface motions. The optics sees a motion only through the slopes of the surface."""
 
 from forward.motion.base import ModalMotion, Motion
+from forward.motion.frame import FrameMotion, FrameParameters
+from forward.motion.ground import RayleighMotion
 from forward.motion.plate import PlateMotion, poisson_shape
 
 # kind -> builder(table, x_range, y_range): how a scene file names a motion. New motions register
 # here; the scene code has no special cases.
-MOTION_KINDS = {"plate": PlateMotion.from_table}
+MOTION_KINDS = {"plate": PlateMotion.from_table, "frame": FrameMotion.from_table, "rayleigh": RayleighMotion.from_table}
 
-__all__ = ["Motion", "ModalMotion", "PlateMotion", "poisson_shape", "MOTION_KINDS"]
+__all__ = ["Motion", "ModalMotion", "PlateMotion", "FrameMotion", "FrameParameters", "RayleighMotion",
+           "poisson_shape", "MOTION_KINDS"]

@@ -22,6 +22,12 @@ class Motion(ABC):
                t: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(h_x, h_y) at points (x, y) (shape (N,), m) and times t (shape (T,), s): shape (T, N) each."""
 
+    def prepare(self, t: NDArray[np.float64], rng: np.random.Generator) -> "Motion":
+        """The motion realized for one simulation on times `t`: random motions draw their
+        realization here (once, so that chunked evaluation stays consistent); deterministic
+        motions return themselves."""
+        return self
+
     def max_frequency(self) -> float:
         """Highest frequency (Hz) in the motion, for sampling checks; 0 if unknown."""
         return 0.0

@@ -84,3 +84,34 @@ def test_version_and_demo(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "sensitivity S =" in r.stdout
     assert (tmp_path / "demo" / "roof_elastic.csv").exists() and (tmp_path / "demo" / "roof_elastic.png").exists()
+
+
+@pytest.mark.parametrize("scene, override, message", [
+    ("roof_frame", "surfaces.roof.motion.k_lateral=-1", "k_lateral"),
+    ("roof_frame", "surfaces.roof.motion.mass=0", "mass"),
+    ("roof_frame", "surfaces.roof.motion.drive_frequency=[120]", "Nyquist"),
+    ("ground_rayleigh", "surfaces.ground.motion.radius=0", "radius"),
+])
+def test_invalid_motion_parameters_exit_2(tmp_path, scene, override, message):
+    r = run("simulate", str(SCENES / f"{scene}.toml"), "--set", override, "-o", str(tmp_path / "o.csv"))
+    assert r.returncode == 2 and message in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_study_fig4_writes_figure_curve_and_numbers(tmp_path):
+    import json
+    r = run("study", "fig4", "-o", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("fig4:")
+    summary = json.loads((tmp_path / "fig4.json").read_text())
+    res = summary["resonances_hz"]
+    for name, f in {"vertical": 2.0, "lateral": 4.0, "tilt": 2 * np.sqrt(3), "twist": 4 * np.sqrt(3)}.items():
+        assert res[name] == pytest.approx(f, rel=1e-3)
+    peaks = summary["spectral_peaks_hz"]
+    assert peaks["x_cm"] == pytest.approx(4.0, abs=0.01) and peaks["z_cm"] == pytest.approx(2.0, abs=0.01)
+    assert peaks["tilt"] == pytest.approx(2 * np.sqrt(3), abs=0.01)
+    assert (tmp_path / "fig4.png").read_bytes()[:4] == b"\x89PNG"
+    assert (tmp_path / "fig4.csv").read_text().startswith("time_s,x_cm_m,z_cm_m,tilt_rad,frequency_hz")
+    r = run("study", "fig99", "-o", str(tmp_path))
+    assert r.returncode == 2 and "invalid choice" in r.stderr
