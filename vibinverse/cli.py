@@ -31,6 +31,16 @@ def builtin_scene(name: str) -> Path:
     return Path(str(files("vibinverse.scenes").joinpath(name)))
 
 
+def _output_dir(path: str) -> Path:
+    """Create the output directory `path` (one-line error if that is impossible)."""
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SceneError(f"-o: cannot create directory {out}: {exc.strerror or exc}") from None
+    return out
+
+
 def _simulate_to(scene_path: Path, overrides: list[str], seed: int | None, out: Path, plot: Path | None) -> float:
     scene, table = load_scene(scene_path, overrides)
     obs = observe(scene, seed)
@@ -48,11 +58,7 @@ def cmd_simulate(args: argparse.Namespace) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> None:
-    out = Path(args.output)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise SceneError(f"-o: cannot create directory {out}: {exc.strerror or exc}") from None
+    out = _output_dir(args.output)
     scene = builtin_scene(DEMO_SCENE)
     csv, png = out / "roof_elastic.csv", out / "roof_elastic.png"
     s = _simulate_to(scene, [], args.seed, csv, png)
@@ -64,11 +70,7 @@ def cmd_demo(args: argparse.Namespace) -> None:
 def cmd_study(args: argparse.Namespace) -> None:
     from vibinverse.studies import STUDIES
 
-    out = Path(args.output)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise SceneError(f"-o: cannot create directory {out}: {exc.strerror or exc}") from None
+    out = _output_dir(args.output)
     names = list(STUDIES) if args.name == "all" else [args.name]
     for name in names:
         print(STUDIES[name][0](out))
