@@ -25,8 +25,7 @@ def pixel_signal(scene: Scene, t: ArrayLike | None = None, seed: int | np.random
     (e.g. the frame's white-noise forcing), one independent stream per surface.
     """
     t = scene.sampling.times() if t is None else np.asarray(t, dtype=float)
-    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    streams = root.spawn(len(scene.surfaces))
+    motions = scene.realize_motions(t, seed)
     x, y = scene.footprint.subpixels()
     owner = scene.owners(x, y)
     sun = scene.sun.direction
@@ -39,10 +38,11 @@ def pixel_signal(scene: Scene, t: ArrayLike | None = None, seed: int | np.random
         if surface.motion is None:
             total += idx.size * float(facet_signal(flat, surface, sun, scene.sensor))
             continue
-        motion = surface.motion.prepare(t, np.random.default_rng(streams[k]))
+        motion = motions[k]
+        xs, ys = x[idx], y[idx]
         step = max(1, _CHUNK_ELEMENTS // idx.size)
         for a in range(0, t.size, step):
-            gx, gy = motion.slopes(x[idx], y[idx], t[a:a + step])
+            gx, gy = motion.slopes(xs, ys, t[a:a + step])
             total[a:a + step] += facet_signal(normals_from_slopes(gx, gy), surface, sun, scene.sensor).sum(axis=1)
     return scene.sun.irradiance * total / x.size
 

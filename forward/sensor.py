@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from forward.reduce import DEFAULT_RTOL, compile_scene
 from forward.render import pixel_signal, sensitivity
 from forward.scene import Noise, Scene
 
@@ -34,10 +35,15 @@ def add_noise(clean: NDArray[np.float64], noise: Noise, rng: np.random.Generator
     return x
 
 
-def observe(scene: Scene, seed: int | None = None) -> Observation:
-    """Simulate the pixel series of `scene`; `seed` makes the motion's and the sensor's noise reproducible."""
+def observe(scene: Scene, seed: int | None = None, rtol: float | None = DEFAULT_RTOL) -> Observation:
+    """Simulate the pixel series of `scene`; `seed` makes the motion's and the sensor's noise
+    reproducible. The clean signal comes from the scene compiler at accuracy `rtol` (relative to
+    each surface's peak-to-peak); rtol=None evaluates every subpixel at every sample."""
     t = scene.sampling.times()
     motion_seed, sensor_seed = np.random.SeedSequence(seed).spawn(2)
-    clean = pixel_signal(scene, t, motion_seed)
+    if rtol is None:
+        clean = pixel_signal(scene, t, motion_seed)
+    else:
+        clean = compile_scene(scene, t, rtol, motion_seed).signal()
     noisy = add_noise(clean, scene.noise, np.random.default_rng(sensor_seed))
     return Observation(t, noisy, clean, sensitivity(clean))

@@ -11,7 +11,10 @@ import sys
 from importlib.resources import files
 from pathlib import Path
 
+import numpy as np
+
 from forward.errors import SceneError
+from forward.reduce import DEFAULT_RTOL, compile_scene
 from forward.scene_file import load_scene
 from forward.sensor import observe
 from vibinverse import __version__
@@ -41,9 +44,12 @@ def _output_dir(path: str) -> Path:
     return out
 
 
-def _simulate_to(scene_path: Path, overrides: list[str], seed: int | None, out: Path, plot: Path | None) -> float:
+def _simulate_to(scene_path: Path, overrides: list[str], seed: int | None, out: Path, plot: Path | None,
+                 rtol: float | None = DEFAULT_RTOL, explain: bool = False) -> float:
     scene, table = load_scene(scene_path, overrides)
-    obs = observe(scene, seed)
+    if explain:
+        print(compile_scene(scene, rtol=rtol if rtol is not None else DEFAULT_RTOL, seed=seed).explain())
+    obs = observe(scene, seed, rtol)
     writers = {out: lambda p: write_series_csv(p, obs, table, seed, __version__)}
     if plot is not None:
         writers[plot] = lambda p: plot_series(p, obs, str(table.get("title") or scene_path.stem))
@@ -52,8 +58,10 @@ def _simulate_to(scene_path: Path, overrides: list[str], seed: int | None, out: 
 
 
 def cmd_simulate(args: argparse.Namespace) -> None:
+    if not (args.rtol > 0 and np.isfinite(args.rtol)):
+        raise SceneError(f"--rtol: {args.rtol:g} is outside the allowed range (0, inf)")
     s = _simulate_to(Path(args.scene), args.set or [], args.seed, Path(args.output),
-                     Path(args.plot) if args.plot else None)
+                     Path(args.plot) if args.plot else None, None if args.dense else args.rtol, args.explain)
     print(f"sensitivity S = {s:.4e} (eq. 21); wrote {args.output}" + (f" and {args.plot}" if args.plot else ""))
 
 
@@ -76,6 +84,24 @@ def cmd_study(args: argparse.Namespace) -> None:
         print(STUDIES[name][0](out))
 
 
+def cmd_bench(args: argparse.Namespace) -> None:
+    import json
+
+    from vibinverse.bench.forward_bench import plot_speed_error, run
+
+    targets = [Path(p) for p in (args.json, args.plot) if p]
+    for p in targets:  # fail before the long run, not after it
+        if not p.parent.is_dir():
+            raise SceneError(f"output: cannot write {p}: no such directory")
+    result = run(builtin_scene(""), args.quick)
+    writers = {}
+    if args.json:
+        writers[Path(args.json)] = lambda p: p.write_text(json.dumps(result, indent=2))
+    if args.plot:
+        writers[Path(args.plot)] = lambda p: plot_speed_error(result["speed_error"], p)
+    write_all(writers)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="vibinverse", description="Passive optical vibrometry: simulate and invert pixel intensity series.")
     p.add_argument("--version", action="version", version=f"vibinverse {__version__}")
@@ -88,6 +114,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--seed", type=int, default=None, help="noise seed (reproducible output)")
     sim.add_argument("-o", "--output", required=True, help="output CSV: time,intensity,intensity_clean")
     sim.add_argument("--plot", help="also write a PNG of the series and its spectrum")
+    sim.add_argument("--rtol", type=float, default=DEFAULT_RTOL,
+                     help=f"accuracy of the fast evaluation, relative to each surface's peak-to-peak (default {DEFAULT_RTOL:g})")
+    sim.add_argument("--dense", action="store_true", help="evaluate every subpixel at every sample (the reference)")
+    sim.add_argument("--explain", action="store_true", help="print the evaluation chosen per surface and its error estimate")
     sim.set_defaults(func=cmd_simulate)
 
     from vibinverse.studies import STUDIES
@@ -97,6 +127,12 @@ def build_parser() -> argparse.ArgumentParser:
     study.add_argument("name", choices=[*STUDIES, "all"], help="figure to reproduce, or all")
     study.add_argument("-o", "--output", default="studies", help="output directory (default: studies)")
     study.set_defaults(func=cmd_study)
+
+    bench = sub.add_parser("bench", help="speed against error of the forward model (reference vs fast paths)")
+    bench.add_argument("--quick", action="store_true", help="128x128 instead of 256x256 subpixels (a few minutes)")
+    bench.add_argument("--json", help="write the results as JSON")
+    bench.add_argument("--plot", help="write the speed-against-error plot (PNG)")
+    bench.set_defaults(func=cmd_bench)
 
     demo = sub.add_parser("demo", help="run the main job on a built-in scene")
     demo.add_argument("-o", "--output", default="vibinverse-demo", help="output directory (default: vibinverse-demo)")

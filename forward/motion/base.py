@@ -45,6 +45,10 @@ class ModalMotion(Motion):
         """Modal coordinates q_k(t), shape (T, K)."""
 
     def slopes(self, x, y, t):
-        s = self.shapes(x, y)
+        cached = getattr(self, "_shape_cache", None)
+        if cached is None or cached[0] is not x or cached[1] is not y:  # shapes are static: once per point set
+            cached = (x, y, self.shapes(x, y))
+            self._shape_cache = cached
+        s = cached[2]
         q = self.coefficients(np.asarray(t, dtype=float))
         return q @ s[:, 0, :], q @ s[:, 1, :]

@@ -29,7 +29,7 @@ from scipy.linalg import expm, solve_discrete_lyapunov
 from scipy.signal import lfilter
 
 from forward.errors import SceneError
-from forward.motion.base import Motion
+from forward.motion.base import ModalMotion, Motion
 from forward.validation import Table
 
 COORDINATES = ("x", "y", "z", "rx", "ry", "rz")
@@ -398,18 +398,22 @@ def slopes_of_attitude(states: NDArray[np.float64]) -> tuple[NDArray[np.float64]
 
 # ---------------------------------------------------------------- the scene's motion
 
-class TiltSeries(Motion):
-    """A rigid roof's realized slopes on a uniform time grid (the same at every point of the roof)."""
+class TiltSeries(ModalMotion):
+    """A rigid roof's realized slopes on a time grid, the same at every point of the roof: a modal
+    motion whose two coordinates are the slopes (h_x, h_y) and whose shapes are uniform."""
 
     def __init__(self, t: NDArray[np.float64], hx: NDArray[np.float64], hy: NDArray[np.float64]):
         self.t, self.hx, self.hy = t, hx, hy
 
-    def slopes(self, x, y, t):
+    def shapes(self, x, y):
+        n = np.asarray(x).size
+        out = np.zeros((2, 2, n))
+        out[0, 0], out[1, 1] = 1.0, 1.0
+        return out
+
+    def coefficients(self, t):
         t = np.asarray(t, dtype=float)
-        hx = np.interp(t, self.t, self.hx)[:, None]
-        hy = np.interp(t, self.t, self.hy)[:, None]
-        shape = (t.size, np.asarray(x).size)
-        return np.broadcast_to(hx, shape), np.broadcast_to(hy, shape)
+        return np.stack([np.interp(t, self.t, self.hx), np.interp(t, self.t, self.hy)], axis=1)
 
 
 class FrameMotion(Motion):

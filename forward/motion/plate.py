@@ -36,6 +36,7 @@ def poisson_shape(x: NDArray[np.float64], y: NDArray[np.float64], lx: float, ly:
     a, b = lx, ly
     ux, ix = np.unique(x, return_inverse=True)
     uy, iy = np.unique(y, return_inverse=True)
+    n_terms = min(n_terms, _terms_needed(a, float(np.min(np.minimum(uy, b - uy)))))
     m = 2.0 * np.arange(n_terms) + 1.0
     k = m * np.pi / a
     coef = 4.0 * a * a / (np.pi * m) ** 3
@@ -51,6 +52,15 @@ def poisson_shape(x: NDArray[np.float64], y: NDArray[np.float64], lx: float, ly:
     wx = ((a / 2 - ux))[:, None] - cos_x @ ch.T
     wy = -(sin_x @ sh.T)
     return w[ix, iy], wx[ix, iy], wy[ix, iy]
+
+
+def _terms_needed(a: float, edge_distance: float) -> int:
+    """Odd terms after which the slope series is below 1e-16 of its first term at points no
+    closer than `edge_distance` to the edges y = 0, b: term m ~ m^-2 exp(-m pi d / a)."""
+    if edge_distance <= 0:
+        return _N_TERMS
+    m = 40.0 * a / (np.pi * edge_distance)  # exp(-40) ~ 4e-18
+    return int(min(_N_TERMS, max(64, m / 2 + 1)))
 
 
 def center_value(lx: float, ly: float) -> float:

@@ -115,3 +115,28 @@ def test_study_fig4_writes_figure_curve_and_numbers(tmp_path):
     assert (tmp_path / "fig4.csv").read_text().startswith("time_s,x_cm_m,z_cm_m,tilt_rad,frequency_hz")
     r = run("study", "fig99", "-o", str(tmp_path))
     assert r.returncode == 2 and "invalid choice" in r.stderr
+
+
+def test_simulate_explain_dense_and_rtol(tmp_path):
+    r = run("simulate", ROOF, *FAST, "--explain", "-o", str(tmp_path / "a.csv"))
+    assert r.returncode == 0 and "chebyshev" in r.stdout and "est. error" in r.stdout
+    r2 = run("simulate", ROOF, *FAST, "--dense", "-o", str(tmp_path / "b.csv"))
+    assert r2.returncode == 0
+    a = np.loadtxt(tmp_path / "a.csv", delimiter=",", comments="#", skiprows=6)
+    b = np.loadtxt(tmp_path / "b.csv", delimiter=",", comments="#", skiprows=6)
+    assert np.abs(a[:, 2] - b[:, 2]).max() <= 1e-5 * np.ptp(b[:, 2])
+    r = run("simulate", ROOF, "--rtol", "-1", "-o", str(tmp_path / "c.csv"))
+    assert r.returncode == 2 and "--rtol" in r.stderr and not (tmp_path / "c.csv").exists()
+
+
+def test_forward_bench_rows_have_the_documented_fields():
+    from vibinverse.bench.forward_bench import forward_rows, scaling_rows, speed_error_rows
+    rows = forward_rows(SCENES, resolution=20, n_samples=400, log=lambda *a: None)
+    assert [r["scene"] for r in rows] == ["roof_elastic", "glass_brewster", "roof_frame", "ground_rayleigh"]
+    for r in rows:
+        assert {"scene", "reference_s", "fast_s", "speedup", "rel_error"} <= set(r)
+        assert r["rel_error"] <= 1e-3
+    scaling = scaling_rows(SCENES, resolutions=(16,), samples=(100, 1000), log=lambda *a: None)
+    assert [(r["subpixels"], r["samples"]) for r in scaling] == [(256, 100), (256, 1000)]
+    se = speed_error_rows(SCENES, 24, n=200, coarse=(8,), log=lambda *a: None)
+    assert {r["method"] for r in se} == {"fast", "dense"}

@@ -8,7 +8,6 @@ exact (via H(i omega)). We plot x_cm, z_cm and the signed tilt alpha (rotation a
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +15,7 @@ from scipy.optimize import minimize_scalar
 from scipy.signal import find_peaks
 
 from forward.motion.frame import Drive, FrameParameters, linearize, steady_state
-from vibinverse.output import write_all
+from vibinverse.studies.common import write_study
 
 PAPER = FrameParameters(mass=1.0, lx=50.0, ly=50.0, k1=(2 * np.pi) ** 2, b1=0.05, k2=4 * (2 * np.pi) ** 2, b2=0.05)
 FS = 200.0
@@ -39,7 +38,7 @@ def frequency_response(params: FrameParameters, freqs: np.ndarray, drive: Drive)
     return out
 
 
-def fig4(outdir: Path, params: FrameParameters = PAPER) -> str:
+def fig4(outdir: Path, quick: bool = False, params: FrameParameters = PAPER) -> str:
     freqs = np.arange(1, int(round(FS / 2 / F_MIN))) * F_MIN  # 0.1 .. 99.9 Hz
     drive = Drive(freqs, np.full(freqs.size, TOTAL_AMPLITUDE / freqs.size))
     t = np.arange(int(round(FS / F_MIN))) / FS  # one 10 s period
@@ -64,22 +63,10 @@ def fig4(outdir: Path, params: FrameParameters = PAPER) -> str:
                                "total_amplitude_m": TOTAL_AMPLITUDE},
     }
     series = {"x_cm_m": q[:, 0], "z_cm_m": q[:, 2], "tilt_rad": q[:, 3]}
+    curve = {"time_s": t, **series, "frequency_hz": curve_f, **{f"{k}_per_m": v for k, v in gain.items()}}
 
-    def csv(path: Path) -> None:
-        cols = [t, *series.values(), curve_f, *gain.values()]
-        header = "time_s," + ",".join(series) + ",frequency_hz," + ",".join(f"{k}_per_m" for k in gain)
-        np.savetxt(path, np.column_stack(cols), delimiter=",", header=header, comments="", fmt="%.10g")
-
-    def js(path: Path) -> None:
-        path.write_text(json.dumps(summary, indent=2))
-
-    def png(path: Path) -> None:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, axes = plt.subplots(3, 2, figsize=(10, 8), constrained_layout=True)
+    def plot(fig):
+        axes = fig.subplots(3, 2)
         labels = {"x_cm": "x_cm (m)", "z_cm": "z_cm (m)", "tilt": "tilt alpha (rad)"}
         for row, (name, i) in enumerate(CHANNELS.items()):
             axes[row, 0].plot(t, q[:, i], lw=0.8)
@@ -90,10 +77,8 @@ def fig4(outdir: Path, params: FrameParameters = PAPER) -> str:
             axes[row, 1].text(0.98, 0.9, f"peak {peaks[name]:.2f} Hz", transform=axes[row, 1].transAxes, ha="right")
         axes[0, 0].set_title("impulse-train response (10 s period)")
         axes[0, 1].set_title("frequency response")
-        fig.savefig(path, dpi=100, format="png")
-        plt.close(fig)
 
-    write_all({outdir / "fig4.png": png, outdir / "fig4.csv": csv, outdir / "fig4.json": js})
+    write_study(outdir, "fig4", curve, summary, plot)
     r = summary["resonances_hz"]
     return (f"fig4: resonances vertical {r['vertical']:.3f}, lateral {r['lateral']:.3f}, tilt {r['tilt']:.3f}, "
             f"twist {r['twist']:.3f} Hz; peaks x_cm {peaks['x_cm']:.2f}, z_cm {peaks['z_cm']:.2f}, "

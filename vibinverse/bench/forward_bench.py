@@ -1,0 +1,113 @@
+"""Forward model: the dense reference against the scene compiler, side by side.
+
+Speed ratios, not absolute times, are the result (machines are noisy); every row reports the error
+of the fast path against the reference computed in the same run.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from forward.reduce import DEFAULT_RTOL, compile_scene
+from forward.render import pixel_signal
+from forward.scene_file import load_scene
+
+SCENES = ("roof_elastic", "glass_brewster", "roof_frame", "ground_rayleigh")
+N_SAMPLES = 4000
+
+
+def _scene(path: Path, resolution: int, n_samples: int):
+    fs = load_scene(path)[0].sampling.fs
+    return load_scene(path, [f"footprint.resolution={resolution}", f"sampling.duration={n_samples / fs!r}"])[0]
+
+
+def _timed(fn) -> tuple[Any, float]:
+    t0 = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - t0
+
+
+def forward_rows(scene_dir: Path, resolution: int, n_samples: int = N_SAMPLES, rtol: float = DEFAULT_RTOL,
+                 log=print) -> list[dict]:
+    """One row per example scene: dense reference vs fast path at the same resolution."""
+    rows = []
+    for name in SCENES:
+        scene = _scene(scene_dir / f"{name}.toml", resolution, n_samples)
+        ref, t_ref = _timed(lambda: pixel_signal(scene, seed=0))
+        compiled, t_fast = _timed(lambda: compile_scene(scene, rtol=rtol, seed=0))
+        fast, t_eval = _timed(compiled.signal)
+        err = float(np.abs(fast - ref).max() / np.ptp(ref))
+        row = {"scene": name, "subpixels": resolution**2, "samples": n_samples, "reference_s": t_ref,
+               "fast_s": t_fast + t_eval, "speedup": t_ref / (t_fast + t_eval), "rel_error": err,
+               "paths": {s.name: s.kind for s in compiled.surfaces}}
+        log(f"  {name:<16} reference {t_ref:7.2f} s   fast {row['fast_s']:7.3f} s   speedup {row['speedup']:7.0f}x"
+            f"   rel_error {err:.1e}   ({', '.join(f'{k}: {v}' for k, v in row['paths'].items())})")
+        rows.append(row)
+    return rows
+
+
+def scaling_rows(scene_dir: Path, resolutions=(64, 256, 1024), samples=(1_000, 10_000, 100_000), log=print) -> list[dict]:
+    """Fast-path time of the elastic roof over T samples and N subpixels: O(T + N), not O(T N)."""
+    rows = []
+    for res in resolutions:
+        for n in samples:
+            scene = _scene(scene_dir / "roof_elastic.toml", res, n)
+            _, t = _timed(lambda: compile_scene(scene, seed=0).signal())
+            rows.append({"scene": "roof_elastic", "subpixels": res * res, "samples": n, "fast_s": t})
+            log(f"  N = {res}^2, T = {n:>6}: {t:7.3f} s")
+    return rows
+
+
+def speed_error_rows(scene_dir: Path, ref_res: int, n: int = 1000, coarse=(16, 32, 64), log=print) -> list[dict]:
+    """Error against time for the fast path at several rtol and for the dense path at several
+    resolutions, all against one dense reference (elastic roof)."""
+    path = scene_dir / "roof_elastic.toml"
+    scene = _scene(path, ref_res, n)
+    ref = pixel_signal(scene, seed=0)
+    ptp = np.ptp(ref)
+    rows = []
+    for rtol in (1e-2, 1e-4, 1e-6, 1e-9):
+        out, t = _timed(lambda: compile_scene(scene, rtol=rtol, seed=0).signal())
+        rows.append({"method": "fast", "setting": f"rtol={rtol:g}", "time_s": t, "rel_error": float(np.abs(out - ref).max() / ptp)})
+    for res in coarse:
+        coarse = _scene(path, res, n)
+        out, t = _timed(lambda: pixel_signal(coarse, seed=0))
+        rows.append({"method": "dense", "setting": f"{res}x{res}", "time_s": t, "rel_error": float(np.abs(out - ref).max() / ptp)})
+    for r in rows:
+        log(f"  {r['method']:<5} {r['setting']:<11} {r['time_s']:8.3f} s   rel_error {r['rel_error']:.1e}")
+    return rows
+
+
+def plot_speed_error(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.2), constrained_layout=True)
+    for method, marker in (("fast", "o"), ("dense", "s")):
+        sel = [r for r in rows if r["method"] == method]
+        ax.loglog([r["time_s"] for r in sel], [max(r["rel_error"], 1e-17) for r in sel], marker=marker, label=method)
+        for r in sel:
+            ax.annotate(r["setting"], (r["time_s"], max(r["rel_error"], 1e-17)), fontsize=7, xytext=(4, 2),
+                        textcoords="offset points")
+    ax.set(xlabel="wall time (s)", ylabel="max |error| / peak-to-peak", title="elastic roof: speed against error")
+    ax.legend()
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)
+
+
+def run(scene_dir: Path, quick: bool, log=print) -> dict:
+    """The whole forward bench: quick uses 128^2 instead of 256^2 subpixels for the references."""
+    res = 128 if quick else 256
+    log(f"forward model: dense reference vs fast path, {res}x{res} subpixels, {N_SAMPLES} samples")
+    out = {"forward": forward_rows(scene_dir, res, log=log)}
+    log("scaling of the fast path (elastic roof):")
+    out["scaling"] = scaling_rows(scene_dir, log=log)
+    log("speed against error (elastic roof, 1000 samples):")
+    out["speed_error"] = speed_error_rows(scene_dir, res, log=log)
+    return out
