@@ -369,3 +369,31 @@ def _chebyshev(name, weight, coords, mean_value, rtol, value0, floor) -> Surface
     n = 2**level + 1
     return SurfaceModel(name, "chebyshev", weight, coords, error, float(np.ptp(series)), value0,
                         f"{n}{'x' + str(n) if k == 2 else ''} Lobatto nodes", ev)
+
+
+def rigid_observation(scene: Scene, surface_name: str) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
+    """x = x0 + J g + g^T H g / 2 for a rigid surface with slopes g = (h_x, h_y): the pixel's
+    second-order observation model of that surface's tilt (the other surfaces held at rest).
+
+    Independent of the motion's amplitude: it is the facet function's Taylor expansion at rest,
+    weighted by the surface's share of the footprint, plus every other surface at rest.
+    """
+    x, y = scene.footprint.subpixels()
+    owner = scene.owners(x, y)
+    sun = scene.sun.direction
+    names = [s.name for s in scene.surfaces]
+    if surface_name not in names:
+        raise ValueError(f"no surface named {surface_name!r}; surfaces: {', '.join(names)}")
+    x0, jac, hess = 0.0, np.zeros(2), np.zeros((2, 2))
+    for k, surface in enumerate((*scene.surfaces, scene.background)):
+        weight = np.count_nonzero(owner == (k if k < len(scene.surfaces) else -1)) / x.size
+        if weight == 0.0:
+            continue
+        facet = _facet_function(surface, sun, scene)
+        if surface.name == surface_name and k < len(scene.surfaces):
+            d = facet_derivatives(facet, _scale(surface, scene))
+            jac = weight * np.array([d[(1, 0)], d[(0, 1)]])
+            hess = weight * np.array([[d[(2, 0)], d[(1, 1)]], [d[(1, 1)], d[(0, 2)]]])
+        x0 += weight * float(facet(0.0, 0.0))
+    irr = scene.sun.irradiance
+    return irr * x0, irr * jac, irr * hess

@@ -75,6 +75,7 @@ def scene_from_table(data: dict[str, Any]) -> Scene:
     """Validate a scene table into a `Scene`; a SceneError names the first bad key."""
     top = Table(data, "")
     top.raw("title", "")
+    top.raw("infer", None)  # read by `vibinverse fit` (free parameters and priors)
     sun = _sun(top.table("sun"))
     sensor = _sensor(top.table("sensor"))
     sampling = _sampling(top.table("sampling"))

@@ -21,6 +21,7 @@ dashpots.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -118,10 +119,15 @@ def _spring_from_mode(mass: float, f: float, zeta: float, factor: float, name: s
 
 def corner_jacobians(params: FrameParameters) -> NDArray[np.float64]:
     """J_j (4, 3, 6): small displacement of corner j per generalized coordinate (translation + r x c_j)."""
+    return _corner_jacobians(float(params.lx), float(params.ly)).copy()
+
+
+@lru_cache(maxsize=64)
+def _corner_jacobians(lx: float, ly: float) -> NDArray[np.float64]:
     jac = np.zeros((4, 3, 6))
-    for j, c in enumerate(params.corners()):
+    for j, (sx, sy) in enumerate(CORNER_SIGNS):
         jac[j, :, :3] = np.eye(3)
-        jac[j, :, 3:] = -_skew(c)  # r x c = -c x r
+        jac[j, :, 3:] = -_skew(np.array([sx * lx / 2, sy * ly / 2, 0.0]))  # r x c = -c x r
     return jac
 
 
@@ -208,11 +214,13 @@ class Drive:
     corner: int = 0
     d1: NDArray[np.float64] = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
     d2: NDArray[np.float64] = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    phases: NDArray[np.float64] | None = None  # rad; A_i (cos(w_i t + phase_i) d1 + sin(w_i t + phase_i) d2)
 
     def phasors(self) -> NDArray[np.complex128]:
         """Complex base-displacement amplitudes (n_freq, 12): a(t) = Re(phasor e^{i w t})."""
         out = np.zeros((self.frequencies.size, 12), dtype=complex)
-        out[:, 3 * self.corner:3 * self.corner + 3] = self.amplitudes[:, None] * (self.d1 - 1j * self.d2)[None, :]
+        amp = self.amplitudes * (np.exp(1j * self.phases) if self.phases is not None else 1.0)
+        out[:, 3 * self.corner:3 * self.corner + 3] = amp[:, None] * (self.d1 - 1j * self.d2)[None, :]
         return out
 
     def base(self, t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -223,13 +231,16 @@ class Drive:
         return (ph * e[:, None]).real.sum(0), (ph * (1j * w * e)[:, None]).real.sum(0)
 
 
-def steady_state(lin: LinearFrame, drive: Drive, t: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Exact steady-state (q, q') of the linear model under the drive: shape (T, 6) each, O(T n_freq)."""
-    q = np.zeros((t.size, 6))
-    dq = np.zeros((t.size, 6))
+def steady_state(lin: LinearFrame, drive: Drive, t: NDArray[np.float64], coords=slice(None)
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Exact steady-state (q, q') of the linear model under the drive: shape (T, 6) each (or the
+    selected `coords`), O(T n_freq)."""
+    n = len(range(6)[coords])
+    q = np.zeros((t.size, n))
+    dq = np.zeros((t.size, n))
     for w, ph in zip(2 * np.pi * drive.frequencies, drive.phasors()):
         force = (lin.force_spring + 1j * w * lin.force_damper) @ ph
-        qh = force / (lin.stiffness - w * w * lin.mass + 1j * w * lin.damping)
+        qh = (force / (lin.stiffness - w * w * lin.mass + 1j * w * lin.damping))[coords]
         e = np.exp(1j * w * t)[:, None]
         q += (qh[None, :] * e).real
         dq += (1j * w * qh[None, :] * e).real
@@ -447,7 +458,8 @@ class FrameMotion(Motion):
     def from_table(cls, t: Table, x_range: tuple[float, float], y_range: tuple[float, float]) -> "FrameMotion":
         """Scene table: mass; either k_vertical, b_vertical, k_lateral, b_lateral (physical) or
         {vertical|tilt}_frequency + _damping_ratio and {lateral|twist}_frequency + _damping_ratio
-        (modal); drive_frequency, drive_amplitude (lists), drive_corner, drive_plane; noise_rms; model."""
+        (modal); drive_frequency, drive_amplitude, drive_phase (lists), drive_corner, drive_plane;
+        noise_rms; model."""
         lx, ly = x_range[1] - x_range[0], y_range[1] - y_range[0]
         mass = t.number("mass", 1.0, lo=0.0, lo_open=True)
         physical = ("k_vertical", "b_vertical", "k_lateral", "b_lateral")
@@ -462,13 +474,14 @@ class FrameMotion(Motion):
             params = FrameParameters.from_modal(lx, ly, mass, **modes)
         freqs = np.array(t.numbers("drive_frequency", [], lo=0.0, lo_open=True))
         amps = np.array(t.numbers("drive_amplitude", [], lo=0.0))
-        if freqs.size != amps.size:
-            raise SceneError(f"{t.path('drive_amplitude')}: needs one amplitude per drive_frequency "
-                             f"({freqs.size}), got {amps.size}")
+        phases = np.array(t.numbers("drive_phase", [0.0] * freqs.size))
+        if freqs.size != amps.size or freqs.size != phases.size:
+            raise SceneError(f"{t.path('drive_amplitude')}: needs one amplitude per drive_frequency ({freqs.size}), "
+                             f"got {amps.size} amplitudes and {phases.size} phases")
         corner = t.integer("drive_corner", 0, 0, 3)
         plane = t.raw("drive_plane", [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
         d1, d2 = _plane(plane, t.path("drive_plane"))
-        drive = Drive(freqs, amps, corner, d1, d2) if freqs.size else None
+        drive = Drive(freqs, amps, corner, d1, d2, phases) if freqs.size else None
         model = t.choice("model", "linear", ("linear", "nonlinear"))
         return cls(params, drive, t.number("noise_rms", 0.0, lo=0.0), model)
 

@@ -80,10 +80,16 @@ def test_missing_scene_and_unwritable_output(tmp_path):
 def test_version_and_demo(tmp_path):
     r = run("--version")
     assert r.returncode == 0 and r.stdout.startswith("vibinverse ")
-    r = run("demo", "-o", str(tmp_path / "demo"))
+    r = run("demo", "-o", str(tmp_path / "demo"), "--no-progress")
     assert r.returncode == 0, r.stderr
-    assert "sensitivity S =" in r.stdout
-    assert (tmp_path / "demo" / "roof_elastic.csv").exists() and (tmp_path / "demo" / "roof_elastic.png").exists()
+    assert "report:" in r.stdout and "R-hat" in r.stdout
+    for name in ("frame.csv", "frame.png", "result.nc", "result.json", "report.html"):
+        assert (tmp_path / "demo" / name).exists(), name
+    import json
+    summary = json.loads((tmp_path / "demo" / "result.json").read_text())
+    for name in ("tilt_frequency", "drive_frequency", "drive_amplitude"):
+        p = summary["parameters"]["surfaces.roof.motion." + name]
+        assert p["q05"] <= p["truth"] <= p["q95"], name
 
 
 @pytest.mark.parametrize("scene, override, message", [
@@ -140,3 +146,6 @@ def test_forward_bench_rows_have_the_documented_fields():
     assert [(r["subpixels"], r["samples"]) for r in scaling] == [(256, 100), (256, 1000)]
     se = speed_error_rows(SCENES, 24, n=200, coarse=(8,), log=lambda *a: None)
     assert {r["method"] for r in se} == {"fast", "dense"}
+    from vibinverse.bench.likelihood_bench import likelihood_row
+    lk = likelihood_row(SCENES / "roof_frame.toml", log=lambda *a: None)
+    assert lk["samples"] == 4000 and lk["ours_us"] > 0 and lk["ratio"] > 0

@@ -110,4 +110,14 @@ def run(scene_dir: Path, quick: bool, log=print) -> dict:
     out["scaling"] = scaling_rows(scene_dir, log=log)
     log("speed against error (elastic roof, 1000 samples):")
     out["speed_error"] = speed_error_rows(scene_dir, res, log=log)
+    from vibinverse.bench.likelihood_bench import demo_mcmc_row, likelihood_row
+
+    log("likelihood (sec. 4.2 frame) against celerite2:")
+    out["likelihood"] = likelihood_row(scene_dir / "roof_frame.toml", log=log)
+    if quick:  # keeps --quick under 3 minutes; the full bench measures it
+        out["demo_mcmc"] = None
+        log("demo MCMC to convergence: skipped with --quick")
+    else:
+        log("demo MCMC to convergence:")
+        out["demo_mcmc"] = demo_mcmc_row(scene_dir / "roof_frame.toml", log=log)
     return out

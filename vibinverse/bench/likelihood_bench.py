@@ -1,0 +1,70 @@
+"""Likelihood speed, side by side in one run: our frame log-likelihood (T = 4000) and celerite2's SHO
+log-likelihood on a series of the same length; and the demo's MCMC wall time to convergence."""
+
+from __future__ import annotations
+
+import tempfile
+import time
+import timeit
+from pathlib import Path
+
+import numpy as np
+
+from forward.scene_file import load_scene
+from forward.sensor import observe
+from vibinverse.data import validate
+from vibinverse.fit import default_free, run_fit
+from vibinverse.kalman import log_likelihood
+from vibinverse.problem import Problem
+
+KEY = "surfaces.roof.motion."
+
+
+def _problem(scene_path: Path) -> Problem:
+    scene, table = load_scene(scene_path, ["noise.sigma=0.6"])
+    o = observe(scene, seed=3)
+    series = validate(o.time, o.intensity, "bench", table)
+    return Problem(table, series, default_free(KEY, table, series))
+
+
+def likelihood_row(scene_path: Path, log=print) -> dict:
+    prob = _problem(scene_path)
+    values = prob.truth()
+    n = 300
+    ours = timeit.timeit(lambda: prob.like.log_likelihood(values), number=n) / n * 1e6
+    c = prob.like.components(values)
+    resid = prob.series.intensity - c.mean
+    filt = timeit.timeit(lambda: log_likelihood(resid, c.phi, c.q, c.h, c.r, c.p0), number=n) / n * 1e6
+    row = {"samples": int(prob.series.time.size), "ours_us": ours, "ours_filter_only_us": filt}
+    try:
+        import celerite2
+    except ImportError:
+        log("  celerite2 not installed (pip install '.[test]'): no side-by-side row")
+        row.update({"celerite2_us": None, "ratio": None})
+        return row
+    t = prob.series.time
+    gp = celerite2.GaussianProcess(celerite2.terms.SHOTerm(S0=1.0, w0=2 * np.pi * 3.46, Q=36.0))
+    y = np.random.default_rng(0).normal(size=t.size)
+
+    def cel():
+        gp.compute(t, yerr=0.6)
+        return gp.log_likelihood(y)
+
+    theirs = timeit.timeit(cel, number=n) / n * 1e6
+    row.update({"celerite2_us": theirs, "ratio": ours / theirs, "filter_ratio": filt / theirs})
+    log(f"  T = {t.size}: ours {ours:.0f} us (mean + Kalman; filter alone {filt:.0f} us), celerite2 SHO {theirs:.0f} us;"
+        f" ratio {ours / theirs:.2f} (filter alone {filt / theirs:.2f})")
+    return row
+
+
+def demo_mcmc_row(scene_path: Path, log=print) -> dict:
+    prob = _problem(scene_path)
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        summary, _ = run_fit(prob, "auto", backend=Path(d) / "c.h5", max_steps=7000, progress=False)
+        wall = time.perf_counter() - t0
+    diag = summary["diagnostics"]
+    log(f"  demo fit: {wall:.1f} s ({summary['timing']['mcmc_s']:.1f} s MCMC), {diag['n_steps']} steps, "
+        f"converged {diag['converged']}, R-hat {diag['rhat_max']:.3f}")
+    return {"wall_s": wall, "mcmc_s": summary["timing"]["mcmc_s"], "n_steps": diag["n_steps"],
+            "converged": diag["converged"], "rhat_max": diag["rhat_max"], "ess_min": diag["ess_min"]}

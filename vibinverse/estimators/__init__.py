@@ -1,0 +1,1 @@
+"""Estimators that share one result type: spectral (instant, rough), MAP (+ Laplace), emcee."""
