@@ -214,7 +214,9 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--set", action="append", metavar="dotted.key=value", help="override a scene value")
     fit.add_argument("--free", action="append", metavar="NAME=PRIOR",
                      help="free parameter with prior, e.g. surfaces.roof.motion.tilt_frequency='uniform(2,5)'")
-    fit.add_argument("--method", default="auto", help="spectral | map | mcmc | auto (default: spectral -> map -> mcmc)")
+    fit.add_argument("--method", default="auto",
+                     help="spectral | casadi | map | mcmc | auto (default: spectral -> casadi -> emcee); "
+                          "map is a derivative-free MAP (scipy)")
     fit.add_argument("--seed", type=int, default=0)
     fit.add_argument("--workers", type=int, default=1, help="processes for the sampler")
     fit.add_argument("--max-steps", type=int, default=20000, help="cap on MCMC steps")
