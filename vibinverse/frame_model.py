@@ -169,6 +169,17 @@ class FrameLikelihood:
         sigma = values.get("noise.sigma", get_value(self.base, "noise.sigma") if "noise" in self.base else 0.0)
         return Components(mean, phi, q, h, float(sigma) ** 2, p0)
 
+    def fittable(self) -> set[str]:
+        """The names this likelihood reads: frame dynamics, drive lines, base noise, sensor noise.
+        (Geometry and optics are held at the scene's values: the observation is built once.)"""
+        k = self.key
+        names = {k + n for n in ("tilt_frequency", "tilt_damping_ratio", "lateral_frequency", "lateral_damping_ratio",
+                                 "noise_rms")} | {"noise.sigma"}
+        lines = len(self.base["surfaces"][self.roof]["motion"].get("drive_frequency", []) or [])
+        for n in ("drive_frequency", "drive_amplitude", "drive_phase"):
+            names |= {f"{k}{n}[{i}]" for i in range(lines)} | ({k + n} if lines else set())
+        return names
+
     def _line(self, values: dict[str, float], name: str, i: int) -> float:
         """Drive line i's value: "name[i]" (or plain "name" for line 0) from `values`, else the base."""
         for k in (f"{self.key}{name}[{i}]", *((f"{self.key}{name}",) if i == 0 else ())):

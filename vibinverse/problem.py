@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from forward.errors import SceneError
 from vibinverse.data import Series
 from vibinverse.frame_model import FrameLikelihood, get_value
 from vibinverse.params import ParameterSpace, Prior
@@ -18,12 +19,11 @@ class Problem:
         self.like = FrameLikelihood(table, series)
         self.space = ParameterSpace(free)
         self.series = series
+        fittable = self.like.fittable()
         for name in self.space.names:
-            try:
-                get_value(self.like.base, name)
-            except Exception:
-                if not (name.startswith(self.like.key) or name == "noise.sigma"):
-                    raise
+            if name not in fittable:
+                raise SceneError(f"fit: {name} cannot be fitted (yet); free parameters of this scene: "
+                                 f"{', '.join(sorted(fittable))}")
 
     def __call__(self, z: np.ndarray) -> float:
         return self.log_posterior(z)

@@ -279,6 +279,8 @@ def test_report_renders_table_figures_and_warnings(short_data):
       "-o", "r.nc", "--summary", "r.json"), "needs at least 30 s"),  # the 4 s series is too short for 0.1 Hz
     (("fit", "DATA", "--scene", str(SCENES / "roof_frame.toml"), "--free", f"{K}drive_frequency=uniform(5, 150)",
       "-o", "r.nc", "--summary", "r.json"), "Nyquist"),
+    (("fit", "DATA", "--scene", str(SCENES / "roof_frame.toml"), "--free", "sun.inclination=uniform(0.5, 1.2)",
+      "-o", "r.nc", "--summary", "r.json"), "cannot be fitted"),
     (("fit", "DATA", "--scene", str(SCENES / "roof_frame.toml"), "--method", "ipopt", "-o", "r.nc",
       "--summary", "r.json"), "--method"),
 ])
