@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from importlib.resources import files
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +17,7 @@ from forward.reduce import DEFAULT_RTOL, compile_scene
 from forward.scene_file import load_scene
 from forward.sensor import observe
 from vibinverse import __version__
+from vibinverse.builtin import builtin_scene
 from vibinverse.output import write_all
 from vibinverse.simulation_io import plot_series, write_series_csv
 
@@ -28,11 +28,6 @@ DEMO_SET = ("noise.sigma=0.6",)  # drive-line SNR ~10 (README: how SNR is define
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (argparse prints usage too)
         raise SceneError(f"{self.prog}: {message}")
-
-
-def builtin_scene(name: str) -> Path:
-    """Path of a built-in scene (the files of examples/scenes/, installed as package data)."""
-    return Path(str(files("vibinverse.scenes").joinpath(name)))
 
 
 def _output_dir(path: str) -> Path:

@@ -117,6 +117,7 @@ class FrameLikelihood:
         scene = scene_from_table(self._with_sampling(self.base))
         self.roof_surface = next(s for s in scene.surfaces if s.name == self.roof)
         self.x0, self.jac, self.hess = rigid_observation(scene, self.roof)
+        self._fixed: dict[str, float] = {}  # scene values read once (a likelihood call is a hot path)
 
     def _with_sampling(self, table: dict) -> dict:
         t = copy.deepcopy(table)
@@ -132,7 +133,7 @@ class FrameLikelihood:
     def components(self, values: dict[str, float]) -> Components:
         """Mean signal and state-space matrices at the given parameter values (others from the base)."""
         val = lambda name, default=None: values.get(self.key + name, default if default is not None else
-                                                     get_value(self.base, self.key + name))
+                                                     self._base_value(self.key + name))
         m = self.base["surfaces"][self.roof]["motion"]
         lx = self.roof_surface.x[1] - self.roof_surface.x[0]
         ly = self.roof_surface.y[1] - self.roof_surface.y[0]
@@ -166,7 +167,7 @@ class FrameLikelihood:
             phi[sl, sl], q[sl, sl] = phi_i, q_i
             p0[sl, sl] = _stationary_2x2(phi_i, q_i)
             h[2 * b] = gains[i]
-        sigma = values.get("noise.sigma", get_value(self.base, "noise.sigma") if "noise" in self.base else 0.0)
+        sigma = values.get("noise.sigma", self._base_value("noise.sigma") if "noise" in self.base else 0.0)
         return Components(mean, phi, q, h, float(sigma) ** 2, p0)
 
     def fittable(self) -> set[str]:
@@ -186,9 +187,14 @@ class FrameLikelihood:
             if k in values:
                 return values[k]
         try:
-            return get_value(self.base, f"{self.key}{name}[{i}]")
+            return self._base_value(f"{self.key}{name}[{i}]")
         except SceneError:
             return 0.0  # an absent drive_phase
+
+    def _base_value(self, key: str) -> float:
+        if key not in self._fixed:
+            self._fixed[key] = get_value(self.base, key)
+        return self._fixed[key]
 
     def log_likelihood(self, values: dict[str, float]) -> float:
         c = self.components(values)

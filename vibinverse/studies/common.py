@@ -14,13 +14,12 @@ from forward.reduce import compile_scene
 from forward.render import pixel_signal, sensitivity
 from forward.scene import Scene
 from forward.scene_file import load_scene
+from vibinverse.builtin import builtin_scene
 from vibinverse.output import write_all
 
 def scene_path(name: str) -> Path:
-    """A built-in scene (examples/scenes, installed as package data)."""
-    from importlib.resources import files
-
-    return Path(str(files("vibinverse.scenes").joinpath(f"{name}.toml")))
+    """A built-in scene by name (see vibinverse.builtin)."""
+    return builtin_scene(name)
 
 
 def one_cycle(frequency: float, per_cycle: int = 400) -> list[str]:
