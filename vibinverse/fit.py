@@ -83,7 +83,7 @@ def run_fit(problem: Problem, method: str, *, seed: int = 0, backend: Path | Non
     burn = int(min(chain.shape[0] // 2, 3 * np.nanmax(res["tau"]) if np.all(np.isfinite(res["tau"])) else chain.shape[0] // 2))
     kept = chain[burn:]
     values = np.array([[list(problem.values(z).values()) for z in walker] for walker in kept.transpose(1, 0, 2)])
-    diag = {**_diagnostics(values, res), **detection(problem, fit["values"])}
+    diag = {**_diagnostics(values, res), "multimodal": multimodal(values, names), **detection(problem, fit["values"])}
     flat = values.reshape(-1, values.shape[-1])
     summary = summarize("mcmc" if method == "mcmc" else "auto", names, fit["values"], flat, None, truth, diag, timing,
                         data, problem.space.priors)
@@ -121,6 +121,22 @@ def detection(problem: Problem, values: dict[str, float]) -> dict:
             ll0 = problem.like.log_likelihood({**values, key + name: 0.0})
             out[f"{what}_delta_loglike"] = float(ll - ll0)
             out[f"{what}_detected"] = bool(ll - ll0 > 12.5)
+    return out
+
+
+def multimodal(values: np.ndarray, names: list[str], separation: float = 5.0) -> list[str]:
+    """Parameters whose walkers sit in separate groups: sorted walker means with a gap wider than
+    `separation` times the typical within-walker sd, and at least 2 walkers on each side. An
+    ensemble sampler's walkers do not cross between well-separated modes, so this is how a second
+    mode shows. values: (walker, draw, parameter)."""
+    out = []
+    for j, n in enumerate(names):
+        means = np.sort(values[:, :, j].mean(axis=1))
+        within = float(np.median(values[:, :, j].std(axis=1)))
+        gaps = np.diff(means)
+        k = int(np.argmax(gaps)) if gaps.size else -1
+        if k >= 1 and k <= len(means) - 3 and gaps[k] > separation * max(within, 1e-300):
+            out.append(n)
     return out
 
 

@@ -31,6 +31,9 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
         out.append(f"The sampler has not converged (R-hat {d.get('rhat_max', float('nan')):.3f}, run "
                    f"{d.get('n_steps')} steps against 50 x tau = {50 * d.get('tau_max', float('nan')):.0f}). "
                    "Run longer (--resume --max-steps N).")
+    for n in d.get("multimodal", []) or []:
+        out.append(f"{n} is multimodal: groups of walkers settled in separate modes. The summary mixes them; "
+                   "look at the corner plot and consider a narrower prior or a model with the other mode fixed.")
     for what in ("drive", "resonance"):
         if d.get(f"{what}_detected") is False:
             out.append(f"No {what} is detected: the fit with it is only {d[f'{what}_delta_loglike']:.1f} in "

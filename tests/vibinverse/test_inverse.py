@@ -179,6 +179,19 @@ def test_casadi_objective_equals_the_numpy_posterior_and_its_map_agrees():
         assert a["sd"] == pytest.approx(b["sd"], rel=0.1)  # exact vs finite-difference Hessian
 
 
+def test_multimodal_walkers_are_flagged():
+    from vibinverse.fit import multimodal
+    from vibinverse.report import warnings_for
+    rng = np.random.default_rng(0)
+    one = rng.normal(0.0, 1.0, (16, 500, 2))
+    two = one.copy()
+    two[:6, :, 1] += 40.0  # six walkers stuck in a second mode of parameter 1
+    assert multimodal(one, ["a", "b"]) == []
+    assert multimodal(two, ["a", "b"]) == ["b"]
+    summary = {"diagnostics": {"multimodal": ["b"], "converged": True}, "parameters": {}}
+    assert any("b is multimodal" in w for w in warnings_for(summary, None, []))
+
+
 def test_ten_percent_gaps():
     prob = frame_problem(SNR10, gaps=0.1)
     assert 0.08 < prob.series.n_gaps / prob.series.time.size < 0.12
