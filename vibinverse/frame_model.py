@@ -124,12 +124,6 @@ class FrameLikelihood:
         t["sampling"] = {"fs": 1.0 / self.dt, "duration": self.t[-1] - self.t[0] + self.dt, "start": float(self.t[0])}
         return t
 
-    def table_with(self, values: dict[str, float]) -> dict:
-        out = copy.deepcopy(self.base)
-        for k, v in values.items():
-            set_value(out, k, v)
-        return out
-
     def components(self, values: dict[str, float]) -> Components:
         """Mean signal and state-space matrices at the given parameter values (others from the base)."""
         val = lambda name, default=None: values.get(self.key + name, default if default is not None else
