@@ -96,6 +96,15 @@ class CompiledScene:
             total = total + s.weight * s.series()
         return self.irradiance * total
 
+    def parts(self) -> tuple[float, NDArray[np.float64]]:
+        """(x at rest, x(t) - x at rest): the AC part formed without subtracting the mean where the
+        model allows (Taylor), so that it keeps its digits when it is ~1e-15 of the mean."""
+        dc = sum(s.weight * s.value0 for s in self.surfaces)
+        ac = np.zeros(self.t.shape)
+        for s in self.moving():
+            ac = ac + s.weight * (s.ac(*s.coords.T) if s.kind != "dense" else s.series() - s.value0)
+        return self.irradiance * dc, self.irradiance * ac
+
     def observation(self, q: list[tuple[Any, ...]]) -> Any:
         """x as a function of every moving surface's modal coordinates, in the order of
         `moving()`: numpy arrays or casadi symbols."""
@@ -121,10 +130,13 @@ class CompiledScene:
 
 
 def compile_scene(scene: Scene, t: NDArray[np.float64] | None = None, rtol: float = DEFAULT_RTOL,
-                  seed: int | np.random.SeedSequence | None = None, force: str | None = None) -> CompiledScene:
+                  seed: int | np.random.SeedSequence | None = None, force: str | None = None,
+                  shape_cache: dict | None = None) -> CompiledScene:
     """Reduce `scene` on times `t` (default: its sampling) to the cheapest models meeting `rtol`.
 
     `force` = "dense" | "taylor2" | "chebyshev" overrides the choice (for tests and benchmarks).
+    `shape_cache`, a dict kept by the caller, reuses motion shapes across scenes that differ only
+    in what the shapes do not depend on (a sweep over view angles, sun or sampling).
     """
     t = scene.sampling.times() if t is None else np.asarray(t, dtype=float)
     x, y = scene.footprint.subpixels()
@@ -143,8 +155,17 @@ def compile_scene(scene: Scene, t: NDArray[np.float64] | None = None, rtol: floa
             models.append(SurfaceModel(surface.name, "static", weight, None, value0=float(facet(0.0, 0.0))))
             continue
         models.append(_compile_surface(surface.name, weight, motion, x[idx], y[idx], t, facet, rtol,
-                                       _scale(surface, scene), force))
+                                       surface_derivatives(surface, scene, shape_cache), force, shape_cache))
     return CompiledScene(t, scene.sun.irradiance, models, rtol)
+
+
+def surface_derivatives(surface: Surface, scene: Scene, cache: dict | None = None) -> dict[tuple[int, int], float]:
+    """The facet function's derivatives at rest (`facet_derivatives`) for `surface` in `scene`,
+    kept in `cache` by optics, sun and sensor."""
+    scale = _scale(surface, scene)
+    facet = _facet_function(surface, scene.sun.direction, scene)
+    return _cached(cache, ("facet", surface.material, surface.lobe_width, scene.sun, scene.sensor, scale),
+                   lambda: facet_derivatives(facet, scale))
 
 
 def _facet_function(surface: Surface, sun: NDArray[np.float64], scene: Scene) -> Callable:
@@ -161,28 +182,35 @@ def _scale(surface: Surface, scene: Scene) -> float:
     return float(s)
 
 
-def _compile_surface(name, weight, motion, x, y, t, facet, rtol, scale, force) -> SurfaceModel:
+def _cached(cache: dict | None, key: tuple | None, compute: Callable[[], Any]) -> Any:
+    if cache is None or key is None:
+        return compute()
+    if key not in cache:
+        cache[key] = compute()
+    return cache[key]
+
+
+def _shapes(motion: ModalMotion, x, y, cache: dict | None) -> NDArray[np.float64]:
+    key = motion.shape_key()
+    key = None if key is None else (key, x.size, hash(x.tobytes()), hash(y.tobytes()))
+    return _cached(cache, key, lambda: motion.shapes(x, y))
+
+
+def _compile_surface(name, weight, motion, x, y, t, facet, rtol, derivs, force, shape_cache=None) -> SurfaceModel:
     if not isinstance(motion, ModalMotion):
         return _dense_model(name, weight, motion, x, y, t, facet, "motion is not modal")
-    shapes = motion.shapes(x, y)  # (K, 2, n)
+    sx, sy, w = modal_points(motion, x, y, shape_cache)
     coords = motion.coefficients(t)  # (T, K)
-    k = shapes.shape[0]
-    flat = shapes.reshape(2 * k, -1).T
-    if np.all(flat == flat[0]):  # a rigid surface: one normal for every subpixel
-        uniq, counts = flat[:1], np.array([flat.shape[0]])
-    else:
-        uniq, counts = flat, np.ones(flat.shape[0])
-    w = counts / counts.sum()
-    sx, sy = uniq[:, 0::2], uniq[:, 1::2]  # (m, K) slope per unit q_k
+    k = sx.shape[1]
     mean_value = lambda q: _mean_facet(facet, sx, sy, w, q)  # q: (P, K) -> (P,)
     value0 = float(facet(0.0, 0.0))
     # what float64 can resolve of X at all: a model within this is as good as the dense reference
     floor = _FLOAT64_FLOOR * abs(value0)
     meets = lambda m: m.error <= max(rtol * m.ptp, floor)
-    detail = (f"rigid: one facet stands for all {flat.shape[0]} subpixels" if uniq.shape[0] == 1
-              else f"{flat.shape[0]} subpixels")
+    detail = (f"rigid: one facet stands for all {x.size} subpixels" if sx.shape[0] == 1
+              else f"{x.size} subpixels")
     if force in (None, "taylor2"):
-        model = _taylor2(name, weight, coords, sx, sy, w, facet, scale, value0)
+        model = _taylor2(name, weight, coords, sx, sy, w, derivs, value0)
         if force == "taylor2" or meets(model):
             model.detail = detail
             return model
@@ -193,6 +221,44 @@ def _compile_surface(name, weight, motion, x, y, t, facet, rtol, scale, force) -
             return model
     return _dense_model(name, weight, motion, x, y, t, facet,
                         "no reduced model met rtol" if force is None else "forced")
+
+
+def modal_points(motion: ModalMotion, x: NDArray[np.float64], y: NDArray[np.float64], cache: dict | None = None
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """(sx, sy, w): slopes per unit modal coordinate at the distinct subpixels, shape (m, K) each,
+    and their weights (m,). A rigid surface (one normal everywhere) collapses to m = 1."""
+    shapes = _shapes(motion, x, y, cache)  # (K, 2, n)
+    k = shapes.shape[0]
+    flat = shapes.reshape(2 * k, -1).T
+    if np.all(flat == flat[0]):
+        uniq, counts = flat[:1], np.array([flat.shape[0]])
+    else:
+        uniq, counts = flat, np.ones(flat.shape[0])
+    return uniq[:, 0::2], uniq[:, 1::2], counts / counts.sum()
+
+
+def taylor_coefficients(d: dict[tuple[int, int], float], sx: NDArray[np.float64], sy: NDArray[np.float64],
+                        w: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(J, H) of X(q) = X0 + J q + q^T H q / 2 from the facet derivatives `d` at rest and the
+    footprint moments of the modal slopes."""
+    fx, fy = d[(1, 0)], d[(0, 1)]
+    fxx, fxy, fyy = d[(2, 0)], d[(1, 1)], d[(0, 2)]
+    jac = fx * (w @ sx) + fy * (w @ sy)  # (K,)
+    wx, wy = w[:, None] * sx, w[:, None] * sy
+    hess = fxx * sx.T @ wx + fyy * sy.T @ wy + fxy * (sx.T @ wy + sy.T @ wx)
+    return jac, hess
+
+
+def taylor_ac(jac: NDArray[np.float64], hess: NDArray[np.float64], q: Any) -> Any:
+    """J q + q^T H q / 2 for modal coordinates q (a sequence of K arrays or casadi expressions)."""
+    out = 0.0
+    k = jac.size
+    for i in range(k):
+        out = out + jac[i] * q[i]
+        for j in range(k):
+            if hess[i, j] != 0.0:
+                out = out + 0.5 * hess[i, j] * q[i] * q[j]
+    return out
 
 
 def _mean_facet(facet, sx, sy, w, q):
@@ -250,24 +316,10 @@ def _order_term(d, order, gx, gy):
     return sum(comb(order, a) * d[(a, order - a)] * px[a] * py[order - a] for a in range(order + 1)) / factorial(order)
 
 
-def _taylor2(name, weight, coords, sx, sy, w, facet, scale, value0) -> SurfaceModel:
-    d = facet_derivatives(facet, scale)
-    fx, fy = d[(1, 0)], d[(0, 1)]
-    fxx, fxy, fyy = d[(2, 0)], d[(1, 1)], d[(0, 2)]
-    jac = fx * (w @ sx) + fy * (w @ sy)  # (K,)
-    hess = (fxx * np.einsum("n,nk,nl->kl", w, sx, sx) + fyy * np.einsum("n,nk,nl->kl", w, sy, sy)
-            + fxy * (np.einsum("n,nk,nl->kl", w, sx, sy) + np.einsum("n,nk,nl->kl", w, sy, sx)))
-    k = jac.size
+def _taylor2(name, weight, coords, sx, sy, w, d, value0) -> SurfaceModel:
+    jac, hess = taylor_coefficients(d, sx, sy, w)
     error = _taylor2_error(d, coords, sx, sy, w)
-
-    def ac(*q):
-        out = 0.0
-        for i in range(k):
-            out = out + jac[i] * q[i]
-            for j in range(k):
-                if hess[i, j] != 0.0:
-                    out = out + 0.5 * hess[i, j] * q[i] * q[j]
-        return out
+    ac = lambda *q: taylor_ac(jac, hess, q)
 
     series = ac(*coords.T)
     return SurfaceModel(name, "taylor2", weight, coords, error, float(np.ptp(series)), value0,

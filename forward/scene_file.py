@@ -98,8 +98,19 @@ def scene_from_table(data: dict[str, Any]) -> Scene:
 
 
 def _sun(t: Table) -> Sun:
-    sun = Sun(t.number("inclination", **_INCLINATION), t.number("azimuth"),
-              t.number("irradiance", 1.0, **_POSITIVE))
+    """Sun by angles (inclination, azimuth) or by place and time (date, hour, latitude, longitude)."""
+    if t.has("date") or t.has("hour"):
+        for clash in ("inclination", "azimuth"):
+            if t.has(clash):
+                raise SceneError(f"{t.path(clash)}: give the sun either by angles or by date and hour, not both")
+        from forward.solar import sun_angles
+        elevation, azimuth = sun_angles(t.raw("date"), t.number("hour", lo=0.0, hi=24.0),
+                                        t.number("latitude", lo=-90.0, hi=90.0),
+                                        t.number("longitude", lo=-180.0, hi=180.0),
+                                        t.number("utc_offset", 0.0, lo=-14.0, hi=14.0))
+    else:
+        elevation, azimuth = t.number("inclination", **_INCLINATION), t.number("azimuth")
+    sun = Sun(elevation, azimuth, t.number("irradiance", 1.0, **_POSITIVE))
     t.done()
     return sun
 

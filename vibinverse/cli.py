@@ -159,6 +159,31 @@ def cmd_report(args: argparse.Namespace) -> None:
     print(f"wrote {path}")
 
 
+def cmd_design(args: argparse.Namespace) -> None:
+    from vibinverse.design.sweep import run_design, score, write_design
+
+    if args.workers < 1:
+        raise SceneError(f"--workers: {args.workers}; allowed range [1, inf)")
+    _, table = load_scene(Path(args.scene), args.set or [])
+    result = run_design(table, args.vary or [], args.target, args.threshold, args.workers,
+                        progress=not args.no_progress)
+    out = _output_dir(args.output)
+    write_design(result, out)
+    rows = result["rows"]
+    n_ok = sum(r["status"] == "ok" for r in rows)
+    print(f"{len(rows)} configurations in {result['seconds']:.1f} s ({n_ok} possible, "
+          f"{sum(r['status'] == 'ok' and r['sensitivity'] >= result['threshold'] for r in rows)} detectable "
+          f"at S >= {result['threshold']:g})")
+    for i, r in enumerate(result["best"][:5], 1):
+        where = ", ".join(f"{a.key}={_short(r[a.key])}" for a in result["axes"])
+        print(f"  {i}. {where}: S = {r['sensitivity']:.3g}, worst relative CRB sd = {score(r, result['targets']):.3g}")
+    print(f"wrote {out / 'design.csv'}, {out / 'design.json'} and maps in {out}")
+
+
+def _short(v: object) -> str:
+    return f"{v:.5g}" if isinstance(v, float) else str(v)
+
+
 def cmd_bench(args: argparse.Namespace) -> None:
     import json
 
@@ -227,6 +252,20 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("-o", "--output", default="report", help="output directory")
     report.set_defaults(func=cmd_report)
 
+    design = sub.add_parser("design", help="where, when and how to look: sensitivity, line SNR and "
+                            "Cramer-Rao bounds over a sweep of observation choices")
+    design.add_argument("scene", help="scene file (TOML)")
+    design.add_argument("--vary", action="append", metavar="KEY=start:stop:num|KEY=a,b,c",
+                        help="sweep a scene value or design key (repeat for a grid); default: a sweep suited to the scene")
+    design.add_argument("--target", action="append", metavar="PARAM",
+                        help="parameter whose Cramer-Rao sd to report (repeat); default: frequency and amplitude")
+    design.add_argument("--threshold", type=float, default=1e-4, help="detectability threshold on S (default 1e-4)")
+    design.add_argument("--set", action="append", metavar="dotted.key=value", help="override a scene value")
+    design.add_argument("--workers", type=int, default=1, help="processes")
+    design.add_argument("--no-progress", action="store_true")
+    design.add_argument("-o", "--output", default="design", help="output directory (default: design)")
+    design.set_defaults(func=cmd_design)
+
     bench = sub.add_parser("bench", help="speed against error of the forward model (reference vs fast paths)")
     bench.add_argument("--quick", action="store_true", help="128x128 instead of 256x256 subpixels (a few minutes)")
     bench.add_argument("--json", help="write the results as JSON")
@@ -251,6 +290,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("vibinverse: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into a reader that stopped (e.g. head)
+        sys.stderr.close()
+        return 0
     return 0
 
 

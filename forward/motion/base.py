@@ -44,6 +44,11 @@ class ModalMotion(Motion):
     def coefficients(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
         """Modal coordinates q_k(t), shape (T, K)."""
 
+    def shape_key(self) -> tuple | None:
+        """The values `shapes` depends on (a hashable tuple), so that equal shapes on equal points
+        can be reused across scenes; None when shapes are cheap or not worth keeping."""
+        return None
+
     def slopes(self, x, y, t):
         cached = getattr(self, "_shape_cache", None)
         if cached is None or cached[0] is not x or cached[1] is not y:  # shapes are static: once per point set

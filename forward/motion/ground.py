@@ -126,6 +126,9 @@ class RayleighMotion(ModalMotion):
             modes += [np.stack([g_sin * ux, g_sin * uy]), np.stack([g_cos * ux, g_cos * uy])]
         return np.array(modes)
 
+    def shape_key(self) -> tuple:
+        return ("rayleigh", *self.center, self.radius, self.wave_speed, *self.frequencies, *self.amplitudes)
+
     def coefficients(self, t):
         wt = np.outer(np.asarray(t, dtype=float), self.omega)
         return np.stack([np.sin(wt), np.cos(wt)], axis=2).reshape(wt.shape[0], -1)

@@ -105,6 +105,9 @@ class PlateMotion(ModalMotion):
         _, sx, sy = self._shape(x, y)
         return np.stack([sx, sy])[None]
 
+    def shape_key(self) -> tuple:
+        return ("plate", self.x0, self.x1, self.y0, self.y1, self.q)
+
     def coefficients(self, t):
         return np.cos(2 * np.pi * self.frequency * np.asarray(t, dtype=float) + self.phase)[:, None]
 

@@ -149,3 +149,6 @@ def test_forward_bench_rows_have_the_documented_fields():
     from vibinverse.bench.likelihood_bench import likelihood_row
     lk = likelihood_row(SCENES / "roof_frame.toml", log=lambda *a: None)
     assert lk["samples"] == 4000 and lk["ours_us"] > 0 and lk["ratio"] > 0
+    from vibinverse.bench.design_bench import design_row
+    d = design_row(SCENES / "roof_elastic.toml", 4, workers=(1,), log=lambda *a: None)
+    assert d["configurations"] == 16 and d["seconds"]["1"] > 0 and d["ms_per_configuration"]["1"] > 0

@@ -114,6 +114,11 @@ def run(scene_dir: Path, quick: bool, log=print) -> dict:
 
     log("likelihood (sec. 4.2 frame) against celerite2:")
     out["likelihood"] = likelihood_row(scene_dir / "roof_frame.toml", log=log)
+    from vibinverse.bench.design_bench import design_row
+
+    n = 30 if quick else 100
+    log(f"design sweep {n}x{n} (reduced model, analytic Fisher):")
+    out["design"] = design_row(scene_dir / "roof_elastic.toml", n, log=log)
     if quick:  # keeps --quick under 3 minutes; the full bench measures it
         out["demo_mcmc"] = None
         log("demo MCMC to convergence: skipped with --quick")

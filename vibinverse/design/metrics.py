@@ -1,0 +1,276 @@
+"""What one configuration buys an observer: sensitivity (21), the SNR of each spectral line, and
+the Cramer-Rao standard deviation of each target parameter.
+
+- Deterministic scenes (plate, ground waves): y = mu(theta) + white sensor noise, so the Fisher
+  information is D^T D / var with D = d mu / d theta from the reduced model (`compile_scene`),
+  differenced on its AC part so that 1e-9 m amplitudes keep their digits. Nuisances estimated
+  jointly, as a fit would: a DC level and a time shift (the vibration's phase).
+- Frame scenes (noise-driven resonances): the frame likelihood's Fisher information, mean term
+  through the Kalman filter plus Whittle's covariance term (`vibinverse.fisher`). Nuisances: the
+  drive phases, the base-noise level and the sensor noise, as `vibinverse fit` frees them.
+
+A line's SNR is its amplitude over the standard error of a sinusoid's amplitude fitted in the
+local noise, A / sqrt(2 S(f) / N), with S(f) the noise spectrum at the line (sensor variance for
+white noise).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from forward.errors import SceneError
+from forward.motion.frame import FrameMotion
+from forward.motion import MOTION_KINDS
+from forward.reduce import compile_scene, modal_points, surface_derivatives, taylor_ac, taylor_coefficients
+from forward.validation import Table
+from forward.scene import Noise, Scene
+from forward.scene_file import scene_from_table
+from vibinverse.data import Series
+from vibinverse.design.spec import set_key
+from vibinverse.fisher import crlb_from_fisher, frame_fisher, spectrum_at
+from vibinverse.frame_model import FrameLikelihood, frame_surface, get_value, modal_table
+
+# Design evaluates every configuration with the second-order (Taylor) reduced model: one model
+# for a configuration and its perturbations, so that derivatives are smooth, at ~ms per scene.
+# Its error estimate (relative to the peak-to-peak signal) is reported per row as model_error.
+DESIGN_MODEL = "taylor2"
+_AMPLITUDE_KEYS = ("center_deflection", "amplitude", "pressure", "boundary_amplitude")
+
+
+def is_frame(table: dict) -> bool:
+    return any((s.get("motion") or {}).get("kind") == "frame" for s in (table.get("surfaces") or {}).values())
+
+
+def default_targets(table: dict) -> list[str]:
+    """Frequency and amplitude of each vibration: for a frame, its tilt resonance, damping ratio
+    and first drive line."""
+    if is_frame(table):
+        k = f"surfaces.{frame_surface(table)}.motion."
+        out = [k + "tilt_frequency", k + "tilt_damping_ratio"]
+        if (table["surfaces"][frame_surface(table)]["motion"].get("drive_frequency") or []):
+            out += [k + "drive_frequency", k + "drive_amplitude"]
+        return out
+    out = []
+    for name, s in (table.get("surfaces") or {}).items():
+        motion = s.get("motion") or {}
+        if not motion:
+            continue
+        k = f"surfaces.{name}.motion."
+        out.append(k + "frequency")
+        out += [k + a for a in _AMPLITUDE_KEYS if a in motion][:1]
+    return out
+
+
+def check_targets(table: dict, targets: list[str]) -> None:
+    """One-line errors for targets that are not numbers of this scene (or not fittable)."""
+    if is_frame(table):
+        like_names = _frame_fittable(table)
+        for t in targets:
+            if t not in like_names:
+                raise SceneError(f"--target {t}: not a parameter of this frame scene; choose from "
+                                 f"{', '.join(sorted(like_names))}")
+        return
+    for t in targets:
+        try:
+            get_value(table, t)
+        except SceneError as exc:
+            raise SceneError(f"--target {exc}") from None
+
+
+def _frame_fittable(table: dict) -> set[str]:
+    t = scene_from_table(table).sampling.times()
+    return FrameLikelihood(table, Series(t, np.zeros(t.size), "design")).fittable()
+
+
+def evaluate(table: dict, targets: list[str], cache: dict) -> dict[str, Any]:
+    """Metrics of the configuration `table` (a complete scene table)."""
+    scene = scene_from_table(table)
+    if is_frame(table):
+        return _frame_metrics(table, scene, targets, cache)
+    return _deterministic_metrics(table, scene, targets, cache)
+
+
+def _sensitivity(dc: float, ac: np.ndarray) -> float:
+    """S = (max x - min x) / max x, eq. (21), from the rest value and the AC part (no digits lost)."""
+    top = dc + float(ac.max())
+    if not top > 0:
+        raise SceneError(f"sensitivity: undefined for a signal whose maximum is {top:g} (must be > 0)")
+    return float(np.ptp(ac)) / top
+
+
+def noise_variance(noise: Noise, mean_level: float, peak: float) -> float:
+    """Per-sample variance of the sensor noise: read noise, shot noise at the mean level, and the
+    ADC's quantization step^2 / 12."""
+    var = noise.sigma**2
+    if noise.photons_per_unit > 0:
+        var += max(mean_level, 0.0) / noise.photons_per_unit
+    if noise.adc_bits > 0:
+        full = noise.adc_full_scale if noise.adc_full_scale > 0 else 2.0 * peak
+        var += (full / (2**noise.adc_bits - 1)) ** 2 / 12.0
+    return var
+
+
+def line_amplitude(t: np.ndarray, x: np.ndarray, f: float) -> float:
+    """Amplitude of the sinusoid at f (Hz) in x, by least squares with a constant."""
+    w = 2 * np.pi * f * (t - t[0])
+    basis = np.stack([np.cos(w), np.sin(w), np.ones_like(w)], axis=1)
+    c = np.linalg.lstsq(basis, x, rcond=None)[0]
+    return float(np.hypot(c[0], c[1]))
+
+
+def _line_frequencies(scene: Scene) -> list[float]:
+    out = []
+    for s in scene.surfaces:
+        m = s.motion
+        if m is None:
+            continue
+        freqs = getattr(m, "frequencies", None)
+        out += list(np.atleast_1d(freqs if freqs is not None else getattr(m, "frequency", [])))
+    return [float(f) for f in out]
+
+
+def _step(name: str, value: float, fs: float) -> float:
+    return 1e-3 / fs if name == "sampling.start" else 1e-6 * max(abs(value), 1e-6)
+
+
+def _deterministic_metrics(table: dict, scene: Scene, targets: list[str], cache: dict) -> dict[str, Any]:
+    compiled = compile_scene(scene, seed=0, force=DESIGN_MODEL, shape_cache=cache)
+    dc, ac = compiled.parts()
+    t = compiled.t
+    var = noise_variance(scene.noise, dc + float(ac.mean()), dc + float(ac.max()))
+    if not var > 0:
+        raise SceneError("noise.sigma: design needs sensor noise (sigma > 0, photons or an ADC) to bound parameters")
+    row: dict[str, Any] = {"sensitivity": _sensitivity(dc, ac),
+                           "model_error": compiled.error_bound() / max(float(np.ptp(ac)), 1e-300)}
+    fs, n = scene.sampling.fs, t.size
+    for f in _line_frequencies(scene):
+        for h, label in ((1, ""), (2, " (2f)")):
+            if h * f < fs / 2:
+                row[f"snr {h * f:g} Hz{label}"] = line_amplitude(t, ac, h * f) / np.sqrt(2 * var / n)
+    names = [*targets, "sampling.start"]
+    d = np.array([np.ones(n)] + [_mean_derivative(table, scene, name, cache) for name in names])
+    crlb = crlb_from_fisher(d @ d.T / var, ["dc", *names])
+    return {**row, **_bounds(table, targets, crlb)}
+
+
+def _moving(scene: Scene, cache: dict) -> list[tuple[int, np.ndarray, np.ndarray, float, dict]]:
+    """(index, x, y, weight, facet derivatives) of every moving surface."""
+    x, y = scene.footprint.subpixels()
+    owner = scene.owners(x, y)
+    out = []
+    for k, s in enumerate(scene.surfaces):
+        idx = np.flatnonzero(owner == k)
+        if s.motion is not None and idx.size:
+            out.append((k, x[idx], y[idx], idx.size / x.size, surface_derivatives(s, scene, cache)))
+    return out
+
+
+def _surface_ac(motion: Any, x: np.ndarray, y: np.ndarray, d: dict, t: np.ndarray, cache: dict) -> np.ndarray:
+    """J q + q^T H q / 2 of one surface: the reduced model's AC part (`forward.reduce`)."""
+    sx, sy, w = modal_points(motion, x, y, cache)
+    jac, hess = taylor_coefficients(d, sx, sy, w)
+    return taylor_ac(jac, hess, motion.coefficients(t).T)
+
+
+def _mean_derivative(table: dict, scene: Scene, name: str, cache: dict) -> np.ndarray:
+    """d mu / d name through the reduced model: a motion parameter (or the start time) changes only
+    that motion's coefficients and shapes, so its surface's Taylor model is re-formed at name +- h
+    with the facet derivatives at rest held (they do not depend on the motion)."""
+    t = scene.sampling.times()
+    irr = scene.sun.irradiance
+    if name == "sampling.start":
+        h = _step(name, 0.0, scene.sampling.fs)
+        out = np.zeros(t.size)
+        for k, x, y, weight, d in _moving(scene, cache):
+            m = scene.surfaces[k].motion
+            out += irr * weight * (_surface_ac(m, x, y, d, t + h, cache) - _surface_ac(m, x, y, d, t - h, cache)) / (2 * h)
+        return out
+    parts = name.split(".")
+    if len(parts) >= 4 and parts[0] == "surfaces" and parts[2] == "motion":
+        k = next(i for i, s in enumerate(scene.surfaces) if s.name == parts[1])
+        v = get_value(table, name)
+        h = _step(name, v, scene.sampling.fs)
+        for kk, x, y, weight, d in _moving(scene, cache):
+            if kk == k:
+                up, dn = (_motion_with(table, scene.surfaces[k], name, v + s * h) for s in (1, -1))
+                return irr * weight * (_surface_ac(up, x, y, d, t, cache) - _surface_ac(dn, x, y, d, t, cache)) / (2 * h)
+        return np.zeros(t.size)  # the surface is outside the footprint
+    v = get_value(table, name)  # any other scene value: re-compile the scene at name +- h
+    h = _step(name, v, scene.sampling.fs)
+    (dc_up, ac_up), (dc_dn, ac_dn) = (
+        compile_scene(scene_from_table(_with(table, name, v + s * h)), seed=0, force=DESIGN_MODEL,
+                      shape_cache=cache).parts() for s in (1, -1))
+    return ((ac_up - ac_dn) + (dc_up - dc_dn)) / (2 * h)
+
+
+def _motion_with(table: dict, surface: Any, name: str, value: float) -> Any:
+    """The surface's motion rebuilt from its scene table with `name` set to `value`."""
+    tab = _with(table, name, value)
+    sub = tab["surfaces"][surface.name]["motion"]
+    mt = Table(sub, f"surfaces.{surface.name}.motion")
+    kind = mt.choice("kind", None, tuple(MOTION_KINDS))
+    return MOTION_KINDS[kind](mt, surface.x, surface.y)
+
+
+def _with(table: dict, key: str, value: float) -> dict:
+    import copy
+
+    out = copy.deepcopy(table)
+    set_key(out, key, value)
+    return out
+
+
+def _bounds(table: dict, targets: list[str], crlb: dict[str, float]) -> dict[str, float]:
+    out = {}
+    for name in targets:
+        v = get_value(table, name)
+        out[f"crlb {name}"] = crlb[name]
+        out[f"rel_crlb {name}"] = crlb[name] / abs(v) if v != 0 else np.inf
+    return out
+
+
+def _frame_metrics(table: dict, scene: Scene, targets: list[str], cache: dict) -> dict[str, Any]:
+    t = scene.sampling.times()
+    like = FrameLikelihood(table, Series(t, np.zeros(t.size), "design"))
+    base = like.base
+    k = like.key
+    n_lines = len(base["surfaces"][like.roof]["motion"].get("drive_frequency") or [])
+    nuisance = [f"{k}drive_phase[{i}]" for i in range(n_lines)] + [k + "noise_rms", "noise.sigma"]
+    canonical = [_canonical(n, k) for n in targets]
+    names = list(dict.fromkeys([*canonical, *nuisance]))
+    values = {n: _value(base, n) for n in names}
+    comps = like.components(values)
+    if comps.r <= 0 and not comps.q.any():
+        raise SceneError("noise.sigma: design needs noise (sensor sigma > 0 or frame noise_rms > 0) to bound parameters")
+    compiled = compile_scene(scene, seed=0, force=DESIGN_MODEL, shape_cache=cache)
+    dc, ac = compiled.parts()
+    row: dict[str, Any] = {"sensitivity": _sensitivity(dc, ac),
+                           "model_error": compiled.error_bound() / max(float(np.ptp(ac)), 1e-300)}
+    dt = like.dt
+    motion = next(s.motion for s in scene.surfaces if isinstance(s.motion, FrameMotion))
+    for f in np.atleast_1d(motion.drive.frequencies if motion.drive is not None else []):
+        level = float(spectrum_at(comps, np.array([2 * np.pi * f * dt]))[0])
+        amp = line_amplitude(t, comps.mean - comps.mean.mean(), float(f))
+        row[f"snr {float(f):g} Hz"] = amp / np.sqrt(2 * level / t.size)
+    crlb = crlb_from_fisher(frame_fisher(like, values, names), names)
+    crlb = {orig: crlb[c] for orig, c in zip(targets, canonical)}
+    return {**row, **_bounds(modal_table(table), targets, crlb)}
+
+
+def _canonical(name: str, key: str) -> str:
+    """drive_* without an index is line 0."""
+    for n in ("drive_frequency", "drive_amplitude", "drive_phase"):
+        if name == key + n:
+            return f"{key}{n}[0]"
+    return name
+
+
+def _value(table: dict, name: str) -> float:
+    try:
+        return get_value(table, name)
+    except SceneError:
+        if "drive_phase" in name:
+            return 0.0
+        raise
