@@ -16,7 +16,7 @@ from vibinverse.params import Prior
 from vibinverse.problem import Problem
 from vibinverse.result import summarize
 
-METHODS = ("spectral", "casadi", "map", "mcmc", "auto")
+METHODS = ("spectral", "sindy", "casadi", "map", "mcmc", "auto")
 
 
 def default_free(problem_key: str, table: dict, series: Series) -> dict[str, Prior]:
@@ -62,6 +62,19 @@ def run_fit(problem: Problem, method: str, *, seed: int = 0, backend: Path | Non
     if method == "spectral":
         return summarize("spectral", names, start, None, None, truth, {"converged": None, **detection(problem, start)},
                          timing, data, problem.space.priors), _predictive(problem, start, None)
+    if method in ("sindy", "auto"):
+        t0 = time.perf_counter()
+        sindy = _sindy(problem, starts)
+        timing["sindy_s"] = time.perf_counter() - t0
+        if method == "sindy":
+            values = sindy.pop("_values", start)
+            sd = sindy.pop("_sd", None)
+            diag = {"converged": None, "sindy": sindy, **detection(problem, values)}
+            return (summarize("sindy" if sd is not None else "spectral", names, values, None, sd, truth, diag, timing,
+                              data, problem.space.priors), _predictive(problem, values, None))
+        if "_values" in sindy:  # SINDy seeds the MAP
+            starts = [sindy.pop("_values"), *starts]
+            sindy.pop("_sd", None)
     t0 = time.perf_counter()
     fit, map_method = _map(problem, starts, method, seed)
     timing[f"{map_method}_s"] = time.perf_counter() - t0
@@ -84,6 +97,8 @@ def run_fit(problem: Problem, method: str, *, seed: int = 0, backend: Path | Non
     kept = chain[burn:]
     values = np.array([[list(problem.values(z).values()) for z in walker] for walker in kept.transpose(1, 0, 2)])
     diag = {**_diagnostics(values, res), "multimodal": multimodal(values, names), **detection(problem, fit["values"])}
+    if method == "auto":
+        diag["sindy"] = sindy
     flat = values.reshape(-1, values.shape[-1])
     summary = summarize("mcmc" if method == "mcmc" else "auto", names, fit["values"], flat, None, truth, diag, timing,
                         data, problem.space.priors)
@@ -91,6 +106,38 @@ def run_fit(problem: Problem, method: str, *, seed: int = 0, backend: Path | Non
     extras["_chains"] = values
     extras["_log_prob"] = res["log_prob"][burn:].T
     return summary, extras
+
+
+def _sindy(problem: Problem, starts: list[dict]) -> dict:
+    """SINDy from the spectral candidates: {"status": "ok", "equation", "misfit", "_values", "_sd"}
+    restricted to the free parameters, or {"status": "declined", "reason"}."""
+    from vibinverse.estimators.sindy import SindyFailed, sindy_best
+
+    names = problem.space.names
+    try:
+        res = sindy_best(problem.series, problem.like, [{**_fixed_values(problem), **s} for s in starts])
+    except SindyFailed as exc:
+        print(f"{exc}; continuing without it", flush=True)
+        return {"status": "declined", "reason": str(exc)}
+    bounds = {n: p for n, p in zip(names, problem.space.priors)}
+    values = {n: _inside(res["values"].get(n, s), bounds[n]) for n, s in starts[0].items() if n in bounds}
+    sd = {n: v for n, v in res["sd"].items() if n in values}
+    print(f"sindy: {res['equation']}", flush=True)
+    return {"status": "ok", "equation": res["equation"], "misfit": res["misfit"], "_values": values, "_sd": sd}
+
+
+def _fixed_values(problem: Problem) -> dict[str, float]:
+    """Scene values of the frame parameters that are not free (SINDy reads the whole set)."""
+    out = {}
+    k = problem.like.key
+    for n in (k + "tilt_frequency", k + "tilt_damping_ratio", k + "noise_rms", "noise.sigma"):
+        try:
+            out[n] = problem.like._base_value(n)
+        except SceneError:
+            pass
+    if problem.like.base["surfaces"][problem.like.roof]["motion"].get("drive_frequency"):
+        out[k + "drive_frequency"] = problem.like._line({}, "drive_frequency", 0)
+    return out
 
 
 def _map(problem: Problem, starts: list[dict], method: str, seed: int) -> tuple[dict, str]:

@@ -126,7 +126,8 @@ class CasadiFrameObjective:
         jac, hs = self.like.jac, self.like.hess
         mean = self.like.x0 + jac[0] * gx + jac[1] * gy + 0.5 * (hs[0, 0] * gx * gx + 2 * hs[0, 1] * gx * gy + hs[1, 1] * gy * gy)
         rms = self._value(values, "noise_rms")
-        sigma = values.get("noise.sigma", get_value(self.like.base, "noise.sigma"))
+        sigma = values["noise.sigma"] if "noise.sigma" in values else (
+            get_value(self.like.base, "noise.sigma") if "noise" in self.like.base else 0.0)  # as FrameLikelihood
         phi, qm, p0 = self._tilt_blocks(w, zeta, k1, rms)
         y = np.nan_to_num(self.like.series.intensity)
         mask = ca.DM(np.isfinite(self.like.series.intensity).astype(float))

@@ -84,9 +84,10 @@ def frame_guesses(series: Series, like: FrameLikelihood, bounds: dict[str, tuple
 
 
 def frame_guess(series: Series, like: FrameLikelihood, bounds: dict[str, tuple[float, float]] | None = None,
-                f_d: float | None = None) -> dict[str, float]:
+                f_d: float | None = None, resonance: tuple[float, float] | None = None) -> dict[str, float]:
     """Initial values of the frame parameters from the spectrum (names as in FrameLikelihood), given
-    the drive line f_d (None: no drive), searching the resonance within its prior `bounds`."""
+    the drive line f_d (None: no drive), searching the resonance within its prior `bounds`, or
+    taking it as given (`resonance` = (frequency, damping ratio), e.g. from SINDy)."""
     k = like.key
     bounds = bounds or {}
     t, y = series.time, series.intensity.copy()
@@ -118,6 +119,8 @@ def frame_guess(series: Series, like: FrameLikelihood, bounds: dict[str, tuple[f
     while hi < len(fr) - 1 and smooth[hi] > half:
         hi += 1
     zeta = float(np.clip((fr[hi] - fr[lo]) / (2 * f_t), 0.002, 0.3))
+    if resonance is not None:
+        f_t, zeta = resonance
     guess[k + "tilt_frequency"] = f_t
     guess[k + "tilt_damping_ratio"] = zeta
     # amplitudes through the forward model: its response per unit drive and per unit noise
