@@ -187,19 +187,41 @@ def _short(v: object) -> str:
 def cmd_bench(args: argparse.Namespace) -> None:
     import json
 
-    from vibinverse.bench.forward_bench import plot_speed_error, run
-
     targets = [Path(p) for p in (args.json, args.plot) if p]
     for p in targets:  # fail before the long run, not after it
         if not p.parent.is_dir():
             raise SceneError(f"output: cannot write {p}: no such directory")
-    result = run(builtin_scene(""), args.quick)
+    if args.estimators:
+        from vibinverse.bench.estimators_bench import plot_speed_error, run as run_estimators
+
+        sizes = {"n_seeds": 5, "n_coverage": 20, "mcmc_seeds": 4} if args.quick else {}
+        result = run_estimators(builtin_scene("roof_frame"), **sizes)
+        print(_estimator_table(result["rows"]))
+        print(f"estimator comparison: {result['seconds']:.0f} s")
+        rows = result["rows"]
+    else:
+        from vibinverse.bench.forward_bench import plot_speed_error, run
+
+        result = run(builtin_scene(""), args.quick)
+        rows = result["speed_error"]
     writers = {}
     if args.json:
         writers[Path(args.json)] = lambda p: p.write_text(json.dumps(result, indent=2))
     if args.plot:
-        writers[Path(args.plot)] = lambda p: plot_speed_error(result["speed_error"], p)
+        writers[Path(args.plot)] = lambda p: plot_speed_error(rows, p)
     write_all(writers)
+
+
+def _estimator_table(rows: list[dict]) -> str:
+    fmt = lambda v, f: "-" if v is None else format(v, f)
+    lines = [f"{'method':<9}{'SNR':>4} {'parameter':<20}{'bias':>11}{'rmse':>11}{'crlb_sd':>11}{'rmse/crlb':>10}"
+             f"{'cover90':>8}{'time_s':>8}{'failed':>7}"]
+    for r in rows:
+        ratio = r["rmse"] / r["crlb_sd"] if r["rmse"] is not None and r["crlb_sd"] else None
+        lines.append(f"{r['method']:<9}{r['snr']:>4} {r['param'].rsplit('.', 1)[-1]:<20}{fmt(r['bias'], '11.3g')}"
+                     f"{fmt(r['rmse'], '11.3g')}{fmt(r['crlb_sd'], '11.3g')}{fmt(ratio, '10.2f')}"
+                     f"{fmt(r['coverage90'], '8.2f')}{r['time_s']:8.2f}{r['n_failed']:>4}/{r['n']}")
+    return "\n".join(lines)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -235,8 +257,8 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--free", action="append", metavar="NAME=PRIOR",
                      help="free parameter with prior, e.g. surfaces.roof.motion.tilt_frequency='uniform(2,5)'")
     fit.add_argument("--method", default="auto",
-                     help="spectral | casadi | map | mcmc | auto (default: spectral -> casadi -> emcee); "
-                          "map is a derivative-free MAP (scipy)")
+                     help="spectral | sindy | casadi | map | mcmc | auto (default: spectral -> SINDy -> casadi -> "
+                          "emcee, each seeding the next); map is a derivative-free MAP (scipy)")
     fit.add_argument("--seed", type=int, default=0)
     fit.add_argument("--workers", type=int, default=1, help="processes for the sampler")
     fit.add_argument("--max-steps", type=int, default=20000, help="cap on MCMC steps")
@@ -270,6 +292,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--quick", action="store_true", help="128x128 instead of 256x256 subpixels (a few minutes)")
     bench.add_argument("--json", help="write the results as JSON")
     bench.add_argument("--plot", help="write the speed-against-error plot (PNG)")
+    bench.add_argument("--estimators", action="store_true",
+                       help="instead: spectral, SINDy, casadi and emcee against the Cramer-Rao bound (sec. 4.2 scene, "
+                            "SNR 3/10/30; ~15 min, --quick ~3 min)")
     bench.set_defaults(func=cmd_bench)
 
     demo = sub.add_parser("demo", help="run the main job on a built-in scene")

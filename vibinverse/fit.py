@@ -54,6 +54,8 @@ def run_fit(problem: Problem, method: str, *, seed: int = 0, backend: Path | Non
     bounds = {n: p.bounds for n, p in zip(names, problem.space.priors)}
     starts = [{n: _inside(g.get(n, _prior_centre(p)), p) for n, p in zip(names, problem.space.priors)}
               for g in frame_guesses(problem.series, problem.like, bounds)]
+    # which periodogram line is the drive: the candidates' exact posterior decides (best first)
+    starts.sort(key=lambda st: -_finite(problem.log_posterior(problem.space.to_z(st))))
     start = starts[0]
     timing["spectral_s"] = time.perf_counter() - t0
     truth = problem.truth()
@@ -217,6 +219,10 @@ def _predictive(problem: Problem, values: dict[str, float], draws: np.ndarray | 
         curves = np.array([problem.like.components(dict(zip(problem.space.names, d))).mean for d in pick])
         out["model_q05"], out["model_q95"] = np.percentile(curves, [5, 95], axis=0)
     return out
+
+
+def _finite(v: float) -> float:
+    return v if np.isfinite(v) else -np.inf
 
 
 def _prior_centre(p: Prior) -> float:

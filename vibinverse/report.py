@@ -124,7 +124,16 @@ def write_report(result: Path, outdir: Path) -> Path:
         rows.append(f"<tr><td>{html.escape(n)}</td><td>{cell(p['median'])}</td><td>{cell(p['q05'])} .. {cell(p['q95'])}</td>"
                     f"<td>{cell(p['sd'])}</td><td>{cell(p['map'])}</td><td>{cell(p['truth'])}</td></tr>")
     warn = warnings_for(summary, draws, names)
-    diag = "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(str(v))}</td></tr>" for k, v in summary["diagnostics"].items())
+    diag = "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(str(v))}</td></tr>"
+                   for k, v in summary["diagnostics"].items() if k != "sindy")
+    sindy = summary["diagnostics"].get("sindy")
+    if sindy is None:
+        equation = ""
+    elif sindy.get("status") == "ok":
+        equation = (f"<h2>Identified equation (SINDy)</h2><p><code>{html.escape(sindy['equation'])}</code> "
+                    f"(free-response misfit to the correlation function {sindy['misfit']:.0%})</p>")
+    else:
+        equation = f"<h2>Identified equation (SINDy)</h2><p>Declined: {html.escape(sindy.get('reason', ''))}</p>"
     timing = ", ".join(f"{k} {v:.2f} s" for k, v in summary["timing"].items())
     body = f"""<!doctype html><html><head><meta charset="utf-8"><title>vibinverse report</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto}}table{{border-collapse:collapse}}
@@ -135,7 +144,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}td:first-child{{t
 {''.join(f'<div class="warn">{html.escape(w)}</div>' for w in warn) or '<p>No warnings.</p>'}
 <h2>Parameters</h2><table><tr><th>parameter</th><th>median</th><th>90 % interval</th><th>sd</th><th>MAP</th><th>truth</th></tr>
 {''.join(rows)}</table>
-<h2>Diagnostics</h2><table>{diag}</table>
+{equation}<h2>Diagnostics</h2><table>{diag}</table>
 {''.join(f'<h2>{k}</h2><img src="{v}" style="max-width:100%">' for k, v in figs.items())}
 </body></html>"""
     path = outdir / "report.html"

@@ -75,12 +75,42 @@ def line_candidates(series: Series, band: tuple[float, float], n_candidates: int
 
 def frame_guesses(series: Series, like: FrameLikelihood, bounds: dict[str, tuple[float, float]] | None = None
                   ) -> list[dict[str, float]]:
-    """Candidate initial values, one per plausible drive line (most steady first)."""
+    """Candidate initial values, one per plausible drive line (most steady first). Further drive
+    lines (`drive_frequency[i]`, i >= 1) with a prior in `bounds` start at the strongest steady
+    peak inside that prior, their amplitude and phase calibrated through the forward model."""
     bounds = bounds or {}
     nyq = 0.5 * series.fs
     has_drive = bool(like.base["surfaces"][like.roof]["motion"].get("drive_frequency"))
     lines = line_candidates(series, bounds.get(like.key + "drive_frequency", (0.0, nyq))) if has_drive else []
-    return [frame_guess(series, like, bounds, f) for f in lines] or [frame_guess(series, like, bounds, None)]
+    guesses = [frame_guess(series, like, bounds, f) for f in lines] or [frame_guess(series, like, bounds, None)]
+    for g in guesses:
+        _extra_lines(series, like, bounds, g)
+    return guesses
+
+
+def _extra_lines(series: Series, like: FrameLikelihood, bounds: dict[str, tuple[float, float]],
+                 guess: dict[str, float]) -> None:
+    k = like.key
+    n_lines = len(like.base["surfaces"][like.roof]["motion"].get("drive_frequency") or [])
+    t, y = series.time, series.intensity
+    for i in range(1, n_lines):
+        name = f"{k}drive_frequency[{i}]"
+        if name not in bounds:
+            continue
+        found = line_candidates(series, bounds[name], n_candidates=1)
+        if not found:
+            continue
+        f = found[0]
+        guess[name] = f
+        amp_sig, ph_sig, _ = sinusoid(t, y, f)
+        probe = {**guess, f"{k}drive_amplitude[{i}]": 1.0, f"{k}drive_phase[{i}]": 0.0, k + "noise_rms": 0.0}
+        for j in range(n_lines):
+            if j != i:
+                probe[f"{k}drive_amplitude[{j}]"] = 0.0
+        probe.pop(k + "drive_amplitude", None)
+        amp_m, ph_m, _ = sinusoid(t, like.components(probe).mean, f)
+        guess[f"{k}drive_amplitude[{i}]"] = amp_sig / max(amp_m, 1e-300)
+        guess[f"{k}drive_phase[{i}]"] = float(np.angle(np.exp(1j * (ph_sig - ph_m))))
 
 
 def frame_guess(series: Series, like: FrameLikelihood, bounds: dict[str, tuple[float, float]] | None = None,
