@@ -61,7 +61,7 @@ def cmd_simulate(args: argparse.Namespace) -> None:
     print(f"sensitivity S = {s:.4e} (eq. 21); wrote {args.output}" + (f" and {args.plot}" if args.plot else ""))
 
 
-DEMO_STEPS = 7000  # the demo converges near 5200 steps (50 x tau, tau ~ 100); a cap keeps it < 3 min
+DEMO_STEPS = 7000  # the demo converges near 1500 steps (50 x tau, tau ~ 30); the cap keeps it < 3 min
 
 
 def cmd_demo(args: argparse.Namespace) -> None:
