@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from forward.errors import SceneError
-from forward.motion.frame import Drive, FrameParameters, _mode_zoh, linearize, steady_state
+from forward.motion.frame import Drive, FrameParameters, _mode_zoh, linearize
 from forward.reduce import rigid_observation
 from forward.scene_file import scene_from_table
 from vibinverse.data import Series
@@ -117,6 +117,18 @@ class FrameLikelihood:
         scene = scene_from_table(self._with_sampling(self.base))
         self.roof_surface = next(s for s in scene.surfaces if s.name == self.roof)
         self.x0, self.jac, self.hess = rigid_observation(scene, self.roof)
+        m = self.base["surfaces"][self.roof]["motion"]
+        self.mass = float(m.get("mass", 1.0))
+        self.lx = self.roof_surface.x[1] - self.roof_surface.x[0]
+        self.ly = self.roof_surface.y[1] - self.roof_surface.y[0]
+        self._unit = linearize(FrameParameters(self.mass, self.lx, self.ly, 1.0, 1.0, 1.0, 1.0))
+        check = linearize(FrameParameters(self.mass, self.lx, self.ly, 2.0, 3.0, 5.0, 7.0))
+        rows = list(TILT_MODES)
+        if not (np.allclose(check.stiffness[rows], 2.0 * self._unit.stiffness[rows])
+                and np.allclose(check.force_spring[rows], 2.0 * self._unit.force_spring[rows])
+                and np.allclose(check.damping[rows], 3.0 * self._unit.damping[rows])
+                and np.allclose(check.force_damper[rows], 3.0 * self._unit.force_damper[rows])):
+            raise RuntimeError("frame likelihood: the tilt rows are not linear in (k1, b1)")
         self._fixed: dict[str, float] = {}  # scene values read once (a likelihood call is a hot path)
 
     def _with_sampling(self, table: dict) -> dict:
@@ -129,12 +141,7 @@ class FrameLikelihood:
         val = lambda name, default=None: values.get(self.key + name, default if default is not None else
                                                      self._base_value(self.key + name))
         m = self.base["surfaces"][self.roof]["motion"]
-        lx = self.roof_surface.x[1] - self.roof_surface.x[0]
-        ly = self.roof_surface.y[1] - self.roof_surface.y[0]
-        params = FrameParameters.from_modal(lx, ly, float(m.get("mass", 1.0)),
-                                            tilt=(val("tilt_frequency"), val("tilt_damping_ratio")),
-                                            lateral=(val("lateral_frequency"), val("lateral_damping_ratio")))
-        lin = linearize(params)
+        tilt = self._tilt_rows(val("tilt_frequency"), val("tilt_damping_ratio"))
         n_lines = len(m.get("drive_frequency", []) or [])
         mean = np.full(self.t.shape, self.x0)
         if n_lines:
@@ -143,7 +150,7 @@ class FrameLikelihood:
             plane = np.array(m.get("drive_plane", [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), dtype=float)
             d1, d2 = plane[0] / np.linalg.norm(plane[0]), plane[1] / np.linalg.norm(plane[1])
             drive = Drive(f, a, int(m.get("drive_corner", 0)), d1, d2, ph)
-            q, _ = steady_state(lin, drive, self.t, coords=slice(3, 5))
+            q = self._tilt_steady_state(tilt, drive)
             gx, gy = -q[:, 1], q[:, 0]
             hs = self.hess
             mean = mean + self.jac[0] * gx + self.jac[1] * gy + 0.5 * (hs[0, 0] * gx * gx + 2 * hs[0, 1] * gx * gy
@@ -156,13 +163,38 @@ class FrameLikelihood:
         phi, q, p0, h = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)), np.zeros(n)
         for b, i in enumerate(seen):
             sl = slice(2 * b, 2 * b + 2)
-            phi_i, gam = _mode_zoh(lin.stiffness[i], lin.damping[i], lin.mass[i], self.dt)
-            q_i = rms**2 * (lin.force_spring[i] @ lin.force_spring[i]) * np.outer(gam, gam)
+            phi_i, gam = _mode_zoh(tilt["stiffness"][i], tilt["damping"][i], tilt["mass"][i], self.dt)
+            q_i = rms**2 * (tilt["force_spring"][i] @ tilt["force_spring"][i]) * np.outer(gam, gam)
             phi[sl, sl], q[sl, sl] = phi_i, q_i
             p0[sl, sl] = _stationary_2x2(phi_i, q_i)
             h[2 * b] = gains[i]
         sigma = values.get("noise.sigma", self._base_value("noise.sigma") if "noise" in self.base else 0.0)
         return Components(mean, phi, q, h, float(sigma) ** 2, p0)
+
+    def _tilt_rows(self, f_tilt: float, zeta: float) -> dict[str, dict[int, Any]]:
+        """The linear frame's tilt rows (eqs. (11)-(16) linearized) at this resonance: every one is
+        linear in the corner spring k1 and dashpot b1, so they are scaled from a unit frame built
+        once (`linearize` at k = b = 1; the scaling is verified at construction)."""
+        params = FrameParameters.from_modal(self.lx, self.ly, self.mass, tilt=(f_tilt, zeta), lateral=(1.0, 0.0))
+        k1, b1 = params.k1, params.b1
+        u = self._unit
+        return {"stiffness": {i: k1 * u.stiffness[i] for i in TILT_MODES},
+                "damping": {i: b1 * u.damping[i] for i in TILT_MODES},
+                "mass": {i: u.mass[i] for i in TILT_MODES},
+                "force_spring": {i: k1 * u.force_spring[i] for i in TILT_MODES},
+                "force_damper": {i: b1 * u.force_damper[i] for i in TILT_MODES}}
+
+    def _tilt_steady_state(self, tilt: dict, drive: Drive) -> np.ndarray:
+        """Exact steady state of the tilt coordinates (rx, ry) under the drive, shape (T, 2): as
+        `forward.motion.frame.steady_state`, for the two rows the pixel sees."""
+        q = np.zeros((self.t.size, 2))
+        for w, ph in zip(2 * np.pi * drive.frequencies, drive.phasors()):
+            e = np.exp(1j * w * self.t)
+            for col, i in enumerate(TILT_MODES):
+                force = (tilt["force_spring"][i] + 1j * w * tilt["force_damper"][i]) @ ph
+                qh = force / (tilt["stiffness"][i] - w * w * tilt["mass"][i] + 1j * w * tilt["damping"][i])
+                q[:, col] += (qh * e).real
+        return q
 
     def fittable(self) -> set[str]:
         """The names this likelihood reads: frame dynamics, drive lines, base noise, sensor noise.
@@ -196,8 +228,18 @@ class FrameLikelihood:
 
 
 def _stationary_2x2(phi: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """P = Phi P Phi^T + Q for a 2x2 block: (I - Phi (x) Phi) vec P = vec Q (4 x 4 solve)."""
+    """P = Phi P Phi^T + Q for a 2x2 block: the three equations in (p11, p12, p22), solved by
+    Cramer's rule (a hot path of the likelihood; the same closed form as the casadi objective)."""
     if not q.any():
         return np.zeros((2, 2))
-    p = np.linalg.solve(np.eye(4) - np.kron(phi, phi), q.ravel()).reshape(2, 2)
-    return 0.5 * (p + p.T)
+    a, b, c, d = phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]
+    m = np.array([[1 - a * a, -2 * a * b, -b * b], [-a * c, 1 - (a * d + b * c), -b * d], [-c * c, -2 * c * d, 1 - d * d]])
+    rhs = np.array([q[0, 0], 0.5 * (q[0, 1] + q[1, 0]), q[1, 1]])
+    det = _det3(m)
+    sol = [_det3(np.where(np.arange(3) == j, rhs[:, None], m)) / det for j in range(3)]
+    return np.array([[sol[0], sol[1]], [sol[1], sol[2]]])
+
+
+def _det3(m: np.ndarray) -> float:
+    return float(m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+                 + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))

@@ -20,6 +20,8 @@ dashpots.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -248,7 +250,25 @@ def steady_state(lin: LinearFrame, drive: Drive, t: NDArray[np.float64], coords=
 
 
 def _mode_zoh(k: float, c: float, m: float, dt: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Exact ZOH (Phi, Gamma) of m q'' + c q' + k q = g for one coordinate (2 states)."""
+    """Exact ZOH (Phi, Gamma) of m q'' + c q' + k q = g for one coordinate (2 states).
+
+    Underdamped (zeta <= 0.9, k > 0): the closed form of the matrix exponential of
+    A = [[0, 1], [-w^2, -2 zeta w]] with Gamma = A^-1 (Phi - I) B, B = (0, 1/m) (the likelihood's
+    hot path; equal to the matrix exponential to 2e-13 at w dt >= 6e-4, and to 3e-11 at w dt = 6e-6
+    where Phi - I cancels; tested). Otherwise the matrix exponential itself, which stays exact
+    through critical and over-damping."""
+    if k > 0 and m > 0:
+        w = math.sqrt(k / m)
+        zeta = c / (2 * m * w)
+        if 0 <= zeta <= 0.9:
+            s = math.sqrt(1 - zeta * zeta)
+            wd = w * s
+            e = math.exp(-zeta * w * dt)
+            cs, sn = math.cos(wd * dt), math.sin(wd * dt)
+            phi = np.array([[e * (cs + zeta / s * sn), e * sn / wd],
+                            [-e * w * w * sn / wd, e * (cs - zeta / s * sn)]])
+            a_inv = np.array([[-2 * zeta / w, -1 / (w * w)], [1.0, 0.0]])
+            return phi, a_inv @ ((phi - np.eye(2)) @ np.array([0.0, 1.0 / m]))
     aug = np.zeros((3, 3))
     aug[0, 1] = dt
     aug[1, 0], aug[1, 1], aug[1, 2] = -k / m * dt, -c / m * dt, dt / m

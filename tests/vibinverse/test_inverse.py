@@ -1,6 +1,7 @@
 """Inverse core: data, priors, the Kalman likelihood against two oracles, fits on sec. 4.2 data."""
 
 import json
+import math
 import signal
 import subprocess
 import sys
@@ -302,3 +303,50 @@ def test_fit_bad_input_is_one_line_exit_2(short_data, tmp_path, args, message):
     r = run_cli(*args, cwd=tmp_path)
     assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_fast_likelihood_components_equal_the_forward_models_linear_frame():
+    """The likelihood scales a unit frame's tilt rows and writes the ZOH in closed form; the
+    forward model's `linearize`, `steady_state` and matrix-exponential ZOH are the oracle."""
+    from scipy.linalg import expm
+
+    from forward.motion.frame import Drive, FrameParameters, linearize, steady_state
+
+    prob = frame_problem(SNR10)
+    like = prob.like
+    values = {**prob.truth(), K + "tilt_frequency": 3.1, K + "tilt_damping_ratio": 0.05, K + "drive_phase": 0.4}
+    c = like.components(values)
+    m = like.base["surfaces"][like.roof]["motion"]
+    params = FrameParameters.from_modal(like.lx, like.ly, like.mass, tilt=(3.1, 0.05), lateral=(4.0, 0.004))
+    lin = linearize(params)
+    plane = np.array(m["drive_plane"], dtype=float)
+    drive = Drive(np.array([values[K + "drive_frequency"]]), np.array([values[K + "drive_amplitude"]]),
+                  int(m.get("drive_corner", 0)), plane[0], plane[1], np.array([0.4]))
+    q, _ = steady_state(lin, drive, like.t, coords=slice(3, 5))
+    gx, gy = -q[:, 1], q[:, 0]
+    hs = like.hess
+    mean = like.x0 + like.jac[0] * gx + like.jac[1] * gy + 0.5 * (hs[0, 0] * gx**2 + 2 * hs[0, 1] * gx * gy + hs[1, 1] * gy**2)
+    assert np.abs(c.mean - mean).max() <= 1e-12 * np.ptp(mean)
+    aug = np.zeros((3, 3))
+    i = 4 if abs(like.jac[0]) > 0 else 3
+    aug[0, 1] = like.dt
+    aug[1, 0], aug[1, 1], aug[1, 2] = (-lin.stiffness[i] / lin.mass[i] * like.dt, -lin.damping[i] / lin.mass[i] * like.dt,
+                                       like.dt / lin.mass[i])
+    assert np.abs(c.phi[:2, :2] - expm(aug)[:2, :2]).max() < 1e-12
+
+
+def test_mode_zoh_closed_form_equals_the_matrix_exponential():
+    from scipy.linalg import expm
+
+    from forward.motion.frame import _mode_zoh
+
+    for zeta in (0.0, 1e-6, 0.0138, 0.5, 0.9, 0.95, 1.0, 2.0):  # above 0.9: the matrix exponential path
+        for f, dt in ((3.46, 1 / 200), (99.0, 1 / 200), (0.1, 1e-3)):
+            w, mass = 2 * math.pi * f, 2.0
+            k, c = mass * w * w, 2 * zeta * w * mass
+            aug = np.zeros((3, 3))
+            aug[0, 1], aug[1, 0], aug[1, 1], aug[1, 2] = dt, -k / mass * dt, -c / mass * dt, dt / mass
+            ref = expm(aug)
+            phi, gam = _mode_zoh(k, c, mass, dt)
+            assert np.abs(phi - ref[:2, :2]).max() <= 1e-12 * np.abs(ref[:2, :2]).max()
+            assert np.abs(gam - ref[:2, 2]).max() <= 1e-12 * np.abs(ref[:2, 2]).max()
