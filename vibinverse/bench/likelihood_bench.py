@@ -27,14 +27,20 @@ def _problem(scene_path: Path) -> Problem:
     return Problem(table, series, default_free(KEY, table, series))
 
 
+def _best(fn, number: int = 100, repeat: int = 5) -> float:
+    """Microseconds per call: the best of `repeat` timings of `number` calls, after a warm-up
+    (a noisy machine only ever adds time)."""
+    fn()
+    return min(timeit.repeat(fn, number=number, repeat=repeat)) / number * 1e6
+
+
 def likelihood_row(scene_path: Path, log=print) -> dict:
     prob = _problem(scene_path)
     values = prob.truth()
-    n = 300
-    ours = timeit.timeit(lambda: prob.like.log_likelihood(values), number=n) / n * 1e6
+    ours = _best(lambda: prob.like.log_likelihood(values))
     c = prob.like.components(values)
     resid = prob.series.intensity - c.mean
-    filt = timeit.timeit(lambda: log_likelihood(resid, c.phi, c.q, c.h, c.r, c.p0), number=n) / n * 1e6
+    filt = _best(lambda: log_likelihood(resid, c.phi, c.q, c.h, c.r, c.p0))
     row = {"samples": int(prob.series.time.size), "ours_us": ours, "ours_filter_only_us": filt}
     try:
         import celerite2
@@ -50,7 +56,7 @@ def likelihood_row(scene_path: Path, log=print) -> dict:
         gp.compute(t, yerr=0.6)
         return gp.log_likelihood(y)
 
-    theirs = timeit.timeit(cel, number=n) / n * 1e6
+    theirs = _best(cel)
     row.update({"celerite2_us": theirs, "ratio": ours / theirs, "filter_ratio": filt / theirs})
     log(f"  T = {t.size}: ours {ours:.0f} us (mean + Kalman; filter alone {filt:.0f} us), celerite2 SHO {theirs:.0f} us;"
         f" ratio {ours / theirs:.2f} (filter alone {filt / theirs:.2f})")
