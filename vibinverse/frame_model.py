@@ -73,16 +73,29 @@ def get_value(table: dict, key: str) -> float:
     return float(node)
 
 
-def set_value(table: dict, key: str, value: float) -> None:
+def set_value(table: dict, key: str, value: Any) -> None:
+    """Set dotted `key` in `table`; SceneError names the key. As in `get_value`, "a.b[i]" is
+    element i of a list and a plain "a.b" on a list is its first element."""
     node: Any = table
     parts = key.split(".")
     for part in parts[:-1]:
         node = node.setdefault(_split_index(part)[0], {})
-    base, idx = _split_index(parts[-1])
-    if isinstance(node.get(base), list):
-        node[base][idx or 0] = value
-    else:
+        if not isinstance(node, dict):
+            raise SceneError(f"{key}: {part} is a value, not a table")
+    try:
+        base, idx = _split_index(parts[-1])
+    except ValueError:
+        raise SceneError(f"{key}: the index is not an integer") from None
+    current = node.get(base)
+    if idx is None and not isinstance(current, list):
         node[base] = value
+        return
+    idx = idx or 0
+    items = list(current) if isinstance(current, list) else ([current] if current is not None else [])
+    if not 0 <= idx < len(items):
+        raise SceneError(f"{key}: index {idx} is outside the list of {len(items)} values")
+    items[idx] = value
+    node[base] = items
 
 
 def _split_index(part: str) -> tuple[str, int | None]:
@@ -227,19 +240,27 @@ class FrameLikelihood:
         return log_likelihood(self.series.intensity - c.mean, c.phi, c.q, c.h, c.r, c.p0)
 
 
+def stationary_2x2_entries(phi: Any, q: Any) -> tuple[Any, Any, Any]:
+    """(p11, p12, p22) of the stationary P = Phi P Phi^T + Q of a 2 x 2 block: three linear
+    equations solved by Cramer's rule in plain arithmetic, so numpy floats and casadi expressions
+    (the casadi MAP's graph expands to SX; a linear-solver node would not) take the same formula."""
+    a, b, c, d = phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]
+    m = [[1 - a * a, -2 * a * b, -b * b], [-a * c, 1 - (a * d + b * c), -b * d], [-c * c, -2 * c * d, 1 - d * d]]
+    rhs = [q[0, 0], q[0, 1], q[1, 1]]
+
+    def det3(k):
+        return (k[0][0] * (k[1][1] * k[2][2] - k[1][2] * k[2][1]) - k[0][1] * (k[1][0] * k[2][2] - k[1][2] * k[2][0])
+                + k[0][2] * (k[1][0] * k[2][1] - k[1][1] * k[2][0]))
+
+    den = det3(m)
+    p11, p12, p22 = (det3([[rhs[r] if col == j else m[r][col] for col in range(3)] for r in range(3)]) / den
+                     for j in range(3))
+    return p11, p12, p22
+
+
 def _stationary_2x2(phi: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """P = Phi P Phi^T + Q for a 2x2 block: the three equations in (p11, p12, p22), solved by
-    Cramer's rule (a hot path of the likelihood; the same closed form as the casadi objective)."""
+    """P = Phi P Phi^T + Q for a 2x2 block (a hot path of the likelihood)."""
     if not q.any():
         return np.zeros((2, 2))
-    a, b, c, d = phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]
-    m = np.array([[1 - a * a, -2 * a * b, -b * b], [-a * c, 1 - (a * d + b * c), -b * d], [-c * c, -2 * c * d, 1 - d * d]])
-    rhs = np.array([q[0, 0], 0.5 * (q[0, 1] + q[1, 0]), q[1, 1]])
-    det = _det3(m)
-    sol = [_det3(np.where(np.arange(3) == j, rhs[:, None], m)) / det for j in range(3)]
-    return np.array([[sol[0], sol[1]], [sol[1], sol[2]]])
-
-
-def _det3(m: np.ndarray) -> float:
-    return float(m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
-                 + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
+    p11, p12, p22 = stationary_2x2_entries(phi, q)
+    return np.array([[p11, p12], [p12, p22]])

@@ -265,3 +265,17 @@ def test_default_sweeps_suit_the_scene():
 def test_design_needs_noise():
     res = run_design(table("ground_rayleigh"), ["sun.inclination=0.1"], None)
     assert "design needs sensor noise" in res["rows"][0]["status"]
+
+
+def test_dotted_keys_set_list_elements_like_get_value_reads_them():
+    from vibinverse.frame_model import get_value, set_value
+
+    t = {"m": {"f": [1.0, 2.0], "x": 3.0}}
+    set_value(t, "m.f[1]", 5.0)
+    set_value(t, "m.f", 7.0)  # a plain key on a list is its first element, as get_value reads it
+    set_value(t, "m.x", 4.0)
+    assert t == {"m": {"f": [7.0, 5.0], "x": 4.0}} and get_value(t, "m.f") == 7.0
+    with pytest.raises(SceneError, match=r"m.f\[2\]: index 2 is outside the list of 2 values"):
+        set_value(t, "m.f[2]", 1.0)
+    with pytest.raises(SceneError, match="x is a value, not a table"):
+        set_value(t, "m.x.y", 1.0)

@@ -28,9 +28,9 @@ from forward.validation import Table
 from forward.scene import Noise, Scene
 from forward.scene_file import scene_from_table
 from vibinverse.data import Series
-from vibinverse.design.spec import set_key
 from vibinverse.fisher import crlb_from_fisher, frame_fisher, spectrum_at
-from vibinverse.frame_model import FrameLikelihood, frame_surface, get_value, modal_table
+from vibinverse.estimators.spectral import sinusoid
+from vibinverse.frame_model import FrameLikelihood, frame_surface, get_value, modal_table, set_value
 
 # Design evaluates every configuration with the second-order (Taylor) reduced model: one model
 # for a configuration and its perturbations, so that derivatives are smooth, at ~ms per scene.
@@ -113,11 +113,8 @@ def noise_variance(noise: Noise, mean_level: float, peak: float) -> float:
 
 
 def line_amplitude(t: np.ndarray, x: np.ndarray, f: float) -> float:
-    """Amplitude of the sinusoid at f (Hz) in x, by least squares with a constant."""
-    w = 2 * np.pi * f * (t - t[0])
-    basis = np.stack([np.cos(w), np.sin(w), np.ones_like(w)], axis=1)
-    c = np.linalg.lstsq(basis, x, rcond=None)[0]
-    return float(np.hypot(c[0], c[1]))
+    """Amplitude of the sinusoid at f (Hz) in x (least squares with a constant)."""
+    return sinusoid(t - t[0], x, f)[0]
 
 
 def _line_frequencies(scene: Scene) -> list[float]:
@@ -218,7 +215,7 @@ def _with(table: dict, key: str, value: float) -> dict:
     import copy
 
     out = copy.deepcopy(table)
-    set_key(out, key, value)
+    set_value(out, key, value)
     return out
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from forward.errors import SceneError
 from forward.validation import expression
+from vibinverse.frame_model import set_value
 
 DESIGN_KEYS = ("sensor.offset", "footprint.center", "footprint.center_x", "footprint.center_y", "footprint.width")
 CATEGORICAL = ("sensor.polarizer", "sensor.radiometry", ".material")  # keys (or key endings) taking words
@@ -90,38 +91,11 @@ def configure(table: dict, assignments: dict[str, Any]) -> dict:
     out = copy.deepcopy(table)
     plain = {k: v for k, v in assignments.items() if k not in DESIGN_KEYS}
     for key, value in plain.items():
-        set_key(out, key, value)
+        set_value(out, key, value)
     for key in DESIGN_KEYS:
         if key in assignments:
             _apply_design_key(out, key, float(assignments[key]))
     return out
-
-
-def set_key(table: dict, key: str, value: Any) -> None:
-    """Set dotted `key` ("a.b[i]" sets one element of a list) in `table`."""
-    node: Any = table
-    parts = key.split(".")
-    for part in parts[:-1]:
-        node = node.setdefault(part, {})
-        if not isinstance(node, dict):
-            raise SceneError(f"--vary {key}: {part} is a value, not a table")
-    base, idx = parts[-1], None
-    if base.endswith("]") and "[" in base:
-        base, index = base[:-1].split("[", 1)
-        try:
-            idx = int(index)
-        except ValueError:
-            raise SceneError(f"--vary {key}: index {index!r} is not an integer") from None
-    if idx is None:
-        node[base] = value
-        return
-    current = node.get(base)
-    items = current if isinstance(current, list) else ([current] if current is not None else [])
-    if not 0 <= idx < len(items):
-        raise SceneError(f"--vary {key}: index {idx} is outside the list of {len(items)} values")
-    items = list(items)
-    items[idx] = value
-    node[base] = items
 
 
 def _apply_design_key(table: dict, key: str, value: float) -> None:

@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from forward.motion.frame import FrameParameters, linearize
-from vibinverse.frame_model import get_value
+from vibinverse.frame_model import get_value, stationary_2x2_entries
 from vibinverse.params import Prior
 from vibinverse.problem import Problem
 
@@ -47,16 +47,9 @@ def _log_prior(p: Prior, z, v):
 
 
 def _stationary_2x2(phi, q):
-    """P = Phi P Phi^T + Q for 2 x 2 blocks: three linear equations in (p11, p12, p22), solved by
-    Cramer's rule in plain arithmetic (so the graph expands to SX; a linear-solver node would not)."""
-    a, b, c, d = phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]
-    m = [[1 - a * a, -2 * a * b, -b * b], [-a * c, 1 - (a * d + b * c), -b * d], [-c * c, -2 * c * d, 1 - d * d]]
-    rhs = [q[0, 0], q[0, 1], q[1, 1]]
-    det3 = lambda k: (k[0][0] * (k[1][1] * k[2][2] - k[1][2] * k[2][1]) - k[0][1] * (k[1][0] * k[2][2] - k[1][2] * k[2][0])
-                      + k[0][2] * (k[1][0] * k[2][1] - k[1][1] * k[2][0]))
-    den = det3(m)
-    sol = [det3([[rhs[r] if col == j else m[r][col] for col in range(3)] for r in range(3)]) / den for j in range(3)]
-    return ca.vertcat(ca.horzcat(sol[0], sol[1]), ca.horzcat(sol[1], sol[2]))
+    """P = Phi P Phi^T + Q for 2 x 2 blocks, as a casadi expression (`stationary_2x2_entries`)."""
+    p11, p12, p22 = stationary_2x2_entries(phi, q)
+    return ca.vertcat(ca.horzcat(p11, p12), ca.horzcat(p12, p22))
 
 
 class CasadiFrameObjective:
