@@ -147,7 +147,8 @@ def _deterministic_metrics(table: dict, scene: Scene, targets: list[str], cache:
             if h * f < fs / 2:
                 row[f"snr {h * f:g} Hz{label}"] = line_amplitude(t, ac, h * f) / np.sqrt(2 * var / n)
     names = [*targets, "sampling.start"]
-    d = np.array([np.ones(n)] + [_mean_derivative(table, scene, name, cache) for name in names])
+    moving = _moving(scene, cache)
+    d = np.array([np.ones(n)] + [_mean_derivative(table, scene, name, moving, cache) for name in names])
     crlb = crlb_from_fisher(d @ d.T / var, ["dc", *names])
     return {**row, **_bounds(table, targets, crlb)}
 
@@ -171,7 +172,7 @@ def _surface_ac(motion: Any, x: np.ndarray, y: np.ndarray, d: dict, t: np.ndarra
     return taylor_ac(jac, hess, motion.coefficients(t).T)
 
 
-def _mean_derivative(table: dict, scene: Scene, name: str, cache: dict) -> np.ndarray:
+def _mean_derivative(table: dict, scene: Scene, name: str, moving: list, cache: dict) -> np.ndarray:
     """d mu / d name through the reduced model: a motion parameter (or the start time) changes only
     that motion's coefficients and shapes, so its surface's Taylor model is re-formed at name +- h
     with the facet derivatives at rest held (they do not depend on the motion)."""
@@ -180,7 +181,7 @@ def _mean_derivative(table: dict, scene: Scene, name: str, cache: dict) -> np.nd
     if name == "sampling.start":
         h = _step(name, 0.0, scene.sampling.fs)
         out = np.zeros(t.size)
-        for k, x, y, weight, d in _moving(scene, cache):
+        for k, x, y, weight, d in moving:
             m = scene.surfaces[k].motion
             out += irr * weight * (_surface_ac(m, x, y, d, t + h, cache) - _surface_ac(m, x, y, d, t - h, cache)) / (2 * h)
         return out
@@ -189,7 +190,7 @@ def _mean_derivative(table: dict, scene: Scene, name: str, cache: dict) -> np.nd
         k = next(i for i, s in enumerate(scene.surfaces) if s.name == parts[1])
         v = get_value(table, name)
         h = _step(name, v, scene.sampling.fs)
-        for kk, x, y, weight, d in _moving(scene, cache):
+        for kk, x, y, weight, d in moving:
             if kk == k:
                 up, dn = (_motion_with(table, scene.surfaces[k], name, v + s * h) for s in (1, -1))
                 return irr * weight * (_surface_ac(up, x, y, d, t, cache) - _surface_ac(dn, x, y, d, t, cache)) / (2 * h)
