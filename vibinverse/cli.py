@@ -147,7 +147,8 @@ def cmd_fit(args: argparse.Namespace) -> None:
     d = summary["diagnostics"]
     for what in ("drive", "resonance"):
         if f"{what}_detected" in d and not d[f"{what}_detected"]:
-            print(f"  no {what} detected (log-likelihood gain {d[f'{what}_delta_loglike']:.1f} < 12.5)")
+            print(f"  no {what} detected (log-likelihood gain {d[f'{what}_delta_loglike']:.1f} < "
+                  f"{d[f'{what}_threshold']:.1f})")
     print(f"wrote {out} and {summary_path}")
 
 

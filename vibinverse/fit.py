@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from pathlib import Path
@@ -17,6 +18,7 @@ from vibinverse.problem import Problem
 from vibinverse.result import summarize
 
 METHODS = ("spectral", "sindy", "casadi", "map", "mcmc", "auto")
+DETECTION_GAIN = 12.5  # log-likelihood gain of 5 sigma for one added line at a known frequency
 
 
 def default_free(problem_key: str, table: dict, series: Series) -> dict[str, Prior]:
@@ -161,15 +163,23 @@ def _map(problem: Problem, starts: list[dict], method: str, seed: int) -> tuple[
 
 def detection(problem: Problem, values: dict[str, float]) -> dict:
     """Log-likelihood gain of the fitted drive line and tilt resonance over the same fit without
-    them. Below 12.5 (5 sigma for one added line) the data do not show it: say so, do not report it."""
+    them, against a threshold of 12.5 (5 sigma for one added line at a known frequency) plus
+    ln(N), N the number of independent frequencies (prior width x record span) the fit could have
+    put the line at: the look-elsewhere effect of a free frequency (Bonferroni over Fourier bins).
+    Below it the data do not show the line: say so, do not report it."""
     key = problem.like.key
     ll = problem.like.log_likelihood(values)
+    span = float(problem.series.time[-1] - problem.series.time[0] + problem.series.dt)
+    bounds = dict(zip(problem.space.names, (p.bounds for p in problem.space.priors)))
     out = {}
-    for what, name in (("drive", "drive_amplitude"), ("resonance", "noise_rms")):
+    for what, name, freq in (("drive", "drive_amplitude", "drive_frequency"), ("resonance", "noise_rms", "tilt_frequency")):
         if key + name in values:
             ll0 = problem.like.log_likelihood({**values, key + name: 0.0})
+            lo, hi = bounds.get(key + freq, (0.0, 0.0))
+            threshold = DETECTION_GAIN + math.log(max(1.0, (hi - lo) * span))
             out[f"{what}_delta_loglike"] = float(ll - ll0)
-            out[f"{what}_detected"] = bool(ll - ll0 > 12.5)
+            out[f"{what}_threshold"] = threshold
+            out[f"{what}_detected"] = bool(ll - ll0 > threshold)
     return out
 
 

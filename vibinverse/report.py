@@ -36,8 +36,10 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
                    "look at the corner plot and consider a narrower prior or a model with the other mode fixed.")
     for what in ("drive", "resonance"):
         if d.get(f"{what}_detected") is False:
+            threshold = d.get(f"{what}_threshold", 12.5)
             out.append(f"No {what} is detected: the fit with it is only {d[f'{what}_delta_loglike']:.1f} in "
-                       "log-likelihood above the fit without it (5 sigma needs 12.5). Its numbers below are not a detection.")
+                       f"log-likelihood above the fit without it (the threshold is {threshold:.1f}: 5 sigma, plus the "
+                       "look-elsewhere term of a free frequency). Its numbers below are not a detection.")
     if draws is not None and draws.shape[0] > 10:
         corr = np.corrcoef(draws.T)
         for i in range(len(names)):
