@@ -147,7 +147,7 @@ def test_best_ground_footprint_is_a_fraction_of_the_wavelength():
     best = widths[int(np.argmax(s))]
     assert 0.2 * WAVELENGTH <= best <= 0.4 * WAVELENGTH  # paper: lambda_R / 3; ours 0.25-0.27 lambda_R (README)
     first = rows_by(res, "footprint.width")[5.0]  # inside the piston (R = 10 m): no slope, nothing to see
-    assert first["sensitivity"] == 0.0 and math.isinf(first[f"crlb surfaces.ground.motion.frequency"])
+    assert first["sensitivity"] == 0.0 and math.isinf(first["crlb surfaces.ground.motion.frequency"])
 
 
 def test_p_polarizer_at_brewster_wins_for_glass_in_sensitivity_and_when_shot_noise_limited():

@@ -27,7 +27,7 @@ from forward.sensor import observe
 from vibinverse.data import Series
 from vibinverse.fisher import crlb_from_fisher, frame_fisher
 from vibinverse.fit import default_free, run_fit
-from vibinverse.frame_model import frame_surface, get_value, modal_table
+from vibinverse.frame_model import frame_surface, modal_table
 from vibinverse.problem import Problem
 
 SIGMAS = {3: 2.0, 10: 0.6, 30: 0.2}  # sensor noise for drive-line SNR ~3, ~10, ~30 (`snr_actual` from design)
@@ -89,7 +89,7 @@ def run(scene_path: Path, n_seeds: int = 20, n_coverage: int = 100, mcmc_seeds: 
         max_steps: int = 20000, log=print) -> dict[str, Any]:
     """The comparison; returns {"rows": [...], "settings": {...}, "seconds": total}."""
     t_start = time.perf_counter()
-    rows, fits_all = [], {}
+    rows = []
     key = f"surfaces.{frame_surface(read_table(scene_path))}.motion."
     for snr in snrs:
         table = _table(scene_path, SIGMAS[snr])
@@ -116,7 +116,6 @@ def run(scene_path: Path, n_seeds: int = 20, n_coverage: int = 100, mcmc_seeds: 
             log(f"  emcee    {mcmc_seeds:>4} datasets in {time.perf_counter() - t0:6.1f} s ({workers} workers)")
         for method, fl in fits.items():
             rows += _rows(method, fl, snr, actual, bound, key)
-        fits_all[snr] = fits
     return {"rows": rows, "seconds": time.perf_counter() - t_start,
             "settings": {"scene": scene_path.name, "sigmas": {str(k): v for k, v in SIGMAS.items() if k in snrs},
                          "n_seeds": n_seeds, "n_coverage_casadi": n_coverage, "mcmc_seeds": mcmc_seeds,
