@@ -261,6 +261,43 @@ def taylor_ac(jac: NDArray[np.float64], hess: NDArray[np.float64], q: Any) -> An
     return out
 
 
+@dataclass
+class FootprintLayout:
+    """What the footprint sees at rest: x at rest without the irradiance (sum of coverage x facet
+    value), and every moving surface's (index, subpixel x, y, coverage, facet derivatives)."""
+
+    rest: float
+    moving: list[tuple[int, NDArray[np.float64], NDArray[np.float64], float, dict[tuple[int, int], float]]]
+
+
+def footprint_layout(scene: Scene, cache: dict | None = None) -> FootprintLayout:
+    """The parts of the reduced model that depend on geometry and optics only, not on the motions:
+    with them held, `taylor_surface_ac` re-forms a surface's signal for new motion parameters."""
+    x, y = scene.footprint.subpixels()
+    owner = scene.owners(x, y)
+    rest, moving = 0.0, []
+    for k, surface in enumerate((*scene.surfaces, scene.background)):
+        idx = np.flatnonzero(owner == (k if k < len(scene.surfaces) else -1))
+        if idx.size == 0:
+            continue
+        weight = idx.size / x.size
+        rest += weight * float(_facet_function(surface, scene.sun.direction, scene)(0.0, 0.0))
+        if k < len(scene.surfaces) and surface.motion is not None:
+            moving.append((k, x[idx], y[idx], weight, surface_derivatives(surface, scene, cache)))
+    return FootprintLayout(rest, moving)
+
+
+def taylor_surface_ac(motion: ModalMotion, x: NDArray[np.float64], y: NDArray[np.float64],
+                      derivs: dict[tuple[int, int], float], t: NDArray[np.float64], cache: dict | None = None
+                      ) -> NDArray[np.float64]:
+    """J q(t) + q(t)^T H q(t) / 2 of one modal surface on its subpixels (x, y): the Taylor model's
+    AC part (without coverage and irradiance), from the facet derivatives at rest and the motion's
+    shapes (kept in `cache`) and coordinates."""
+    sx, sy, w = modal_points(motion, x, y, cache)
+    jac, hess = taylor_coefficients(derivs, sx, sy, w)
+    return taylor_ac(jac, hess, motion.coefficients(t).T)
+
+
 def _mean_facet(facet, sx, sy, w, q):
     """mean_n F(S_n q) for each row of q (P, K), chunked."""
     q = np.atleast_2d(q)

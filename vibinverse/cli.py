@@ -111,10 +111,9 @@ def cmd_study(args: argparse.Namespace) -> None:
 def cmd_fit(args: argparse.Namespace) -> None:
     from vibinverse.data import load_series
     from vibinverse.estimators.mcmc import Interrupted
-    from vibinverse.fit import default_free, run_fit
-    from vibinverse.frame_model import frame_surface
+    from vibinverse.fit import detections, free_defaults, run_fit
     from vibinverse.params import parse_free
-    from vibinverse.problem import Problem
+    from vibinverse.problem import Problem, likelihood_for
     from vibinverse.result import write_netcdf
 
     if args.workers < 1 or args.max_steps < 1:
@@ -125,9 +124,9 @@ def cmd_fit(args: argparse.Namespace) -> None:
             raise SceneError(f"output: cannot write {p}: no such directory")
     series = load_series(args.data)
     _, table = load_scene(Path(args.scene), args.set or [])
-    key = f"surfaces.{frame_surface(table)}.motion."
-    free = parse_free(args.free or [], table.get("infer")) or default_free(key, table, series)
-    problem = Problem(table, series, free)
+    free = parse_free(args.free or [], table.get("infer"))
+    like = likelihood_for(table, series)
+    problem = Problem(table, series, free or free_defaults(table, series, like), like=like)
     print(f"data: {series.describe()}")
     chain = Path(args.chain) if args.chain else out.with_suffix(".chain.h5")
     try:
@@ -145,10 +144,9 @@ def cmd_fit(args: argparse.Namespace) -> None:
         truth = "" if v["truth"] is None else f"  truth {v['truth']:.6g}"
         print(f"  {name:<44} {v['median']:.6g}{interval}{truth}")
     d = summary["diagnostics"]
-    for what in ("drive", "resonance"):
-        if f"{what}_detected" in d and not d[f"{what}_detected"]:
-            print(f"  no {what} detected (log-likelihood gain {d[f'{what}_delta_loglike']:.1f} < "
-                  f"{d[f'{what}_threshold']:.1f})")
+    for what, gain, threshold, detected in detections(d):
+        if not detected:
+            print(f"  no {what} detected (log-likelihood gain {gain:.1f} < {threshold:.1f})")
     print(f"wrote {out} and {summary_path}")
 
 

@@ -20,13 +20,18 @@ from typing import Any
 import numpy as np
 
 from forward.errors import SceneError
-from forward.motion.frame import Drive, FrameParameters, _mode_zoh, linearize
+from forward.motion.frame import FrameParameters, _mode_zoh, linearize
 from forward.reduce import rigid_observation
 from forward.scene_file import scene_from_table
 from vibinverse.data import Series
-from vibinverse.kalman import log_likelihood
+from vibinverse.kalman import log_likelihood, njit
 
 TILT_MODES = (3, 4)  # generalized coordinates rx, ry
+
+
+def is_frame(table: dict) -> bool:
+    """Whether a surface of the scene moves as a frame (noise-driven: the state-space likelihood)."""
+    return any((s.get("motion") or {}).get("kind") == "frame" for s in (table.get("surfaces") or {}).values())
 
 
 def frame_surface(table: dict) -> str:
@@ -118,6 +123,8 @@ class Components:
 class FrameLikelihood:
     """log p(data | parameters) for a frame scene; parameters by dotted name over a base table."""
 
+    kind = "frame"
+
     def __init__(self, table: dict, series: Series):
         if not series.uniform:
             raise SceneError("fit: the state-space likelihood needs uniformly sampled times (gaps as NaN are fine)")
@@ -143,6 +150,18 @@ class FrameLikelihood:
                 and np.allclose(check.force_damper[rows], 3.0 * self._unit.force_damper[rows])):
             raise RuntimeError("frame likelihood: the tilt rows are not linear in (k1, b1)")
         self._fixed: dict[str, float] = {}  # scene values read once (a likelihood call is a hot path)
+        self._geometry = self._geometry_names()
+        self._n_lines = len(m.get("drive_frequency", []) or [])
+        plane = np.array(m.get("drive_plane", [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), dtype=float)
+        d1, d2 = plane[0] / np.linalg.norm(plane[0]), plane[1] / np.linalg.norm(plane[1])
+        corner = slice(3 * int(m.get("drive_corner", 0)), 3 * int(m.get("drive_corner", 0)) + 3)
+        # unit-frame force rows at the drive corner, applied to d1 - i d2 (`Drive.phasors`)
+        self._corner_force = {i: (self._unit.force_spring[i, corner] @ (d1 - 1j * d2),
+                                  self._unit.force_damper[i, corner] @ (d1 - 1j * d2)) for i in TILT_MODES}
+        step = (self.t[-1] - self.t[0]) / max(self.t.size - 1, 1)  # the grid's step, to the last ulp
+        on_grid = np.max(np.abs(self.t - (self.t[0] + np.arange(self.t.size) * step))) <= 1e-9 * step
+        self._grid = float(step) if on_grid and self.t.size > 1 else None
+        self._observed: tuple[tuple, tuple] | None = None  # the last re-formed observation, by its values
 
     def _with_sampling(self, table: dict) -> dict:
         t = copy.deepcopy(table)
@@ -155,23 +174,19 @@ class FrameLikelihood:
                                                      self._base_value(self.key + name))
         m = self.base["surfaces"][self.roof]["motion"]
         tilt = self._tilt_rows(val("tilt_frequency"), val("tilt_damping_ratio"))
-        n_lines = len(m.get("drive_frequency", []) or [])
-        mean = np.full(self.t.shape, self.x0)
-        if n_lines:
-            f, a, ph = (np.array([self._line(values, name, i) for i in range(n_lines)])
+        x0, jac, hs = self.observation(values)
+        if self._n_lines:
+            f, a, ph = (np.array([self._line(values, name, i) for i in range(self._n_lines)])
                         for name in ("drive_frequency", "drive_amplitude", "drive_phase"))
-            plane = np.array(m.get("drive_plane", [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), dtype=float)
-            d1, d2 = plane[0] / np.linalg.norm(plane[0]), plane[1] / np.linalg.norm(plane[1])
-            drive = Drive(f, a, int(m.get("drive_corner", 0)), d1, d2, ph)
-            q = self._tilt_steady_state(tilt, drive)
-            gx, gy = -q[:, 1], q[:, 0]
-            hs = self.hess
-            mean = mean + self.jac[0] * gx + self.jac[1] * gy + 0.5 * (hs[0, 0] * gx * gx + 2 * hs[0, 1] * gx * gy
-                                                                      + hs[1, 1] * gy * gy)
+            w = 2 * np.pi * f
+            qx, qy = self._tilt_phasors(tilt, w, a * np.exp(1j * ph))
+            mean = self._drive_mean(w, qx, qy, x0, jac, hs)
+        else:
+            mean = np.full(self.t.shape, x0)
         rms = val("noise_rms", float(m.get("noise_rms", 0.0)))
         # g_x = -ry and g_y = rx; a tilt mode the pixel does not see at first order is left out
-        gains = {3: self.jac[1], 4: -self.jac[0]}
-        seen = [i for i in TILT_MODES if abs(gains[i]) > 1e-9 * np.abs(self.jac).max()]
+        gains = {3: jac[1], 4: -jac[0]}
+        seen = [i for i in TILT_MODES if abs(gains[i]) > 1e-9 * np.abs(jac).max()]
         n = 2 * len(seen)
         phi, q, p0, h = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)), np.zeros(n)
         for b, i in enumerate(seen):
@@ -184,6 +199,34 @@ class FrameLikelihood:
         sigma = values.get("noise.sigma", self._base_value("noise.sigma") if "noise" in self.base else 0.0)
         return Components(mean, phi, q, h, float(sigma) ** 2, p0)
 
+    def _geometry_names(self) -> set[str]:
+        """Scene values the observation depends on and the frame's dynamics do not: sun, view,
+        optics, footprint, the other surfaces, the gain sun.irradiance. (The roof's own extents set
+        its inertia and are not among them.)"""
+        from vibinverse.response_model import numeric_keys
+
+        skip = ("sampling.", "infer.", "title", "noise.", "footprint.resolution", f"surfaces.{self.roof}.motion.",
+                f"surfaces.{self.roof}.x", f"surfaces.{self.roof}.y")
+        return {n for n in numeric_keys(self.base) if not n.startswith(skip)} | {"sun.irradiance"}
+
+    def observation(self, values: dict[str, float]) -> tuple[float, np.ndarray, np.ndarray]:
+        """(x0, J, H) of the roof's tilt: built once at the scene's geometry, re-formed from the
+        scene (`rigid_observation`) when a geometry or optics value is among `values`."""
+        geo = tuple(sorted((n, v) for n, v in values.items() if n in self._geometry))
+        if not geo:
+            return self.x0, self.jac, self.hess
+        if self._observed is None or self._observed[0] != geo:
+            table = copy.deepcopy(self.base)
+            for n, v in geo:
+                set_value(table, n, v)
+            scene = scene_from_table(self._with_sampling(table))
+            self._observed = (geo, rigid_observation(scene, self.roof))
+        return self._observed[1]
+
+    def geometry_free(self, names: list[str]) -> list[str]:
+        """Which of `names` are geometry or optics values (re-forming the observation)."""
+        return [n for n in names if n in self._geometry]
+
     def _tilt_rows(self, f_tilt: float, zeta: float) -> dict[str, dict[int, Any]]:
         """The linear frame's tilt rows (eqs. (11)-(16) linearized) at this resonance: every one is
         linear in the corner spring k1 and dashpot b1, so they are scaled from a unit frame built
@@ -191,30 +234,41 @@ class FrameLikelihood:
         params = FrameParameters.from_modal(self.lx, self.ly, self.mass, tilt=(f_tilt, zeta), lateral=(1.0, 0.0))
         k1, b1 = params.k1, params.b1
         u = self._unit
-        return {"stiffness": {i: k1 * u.stiffness[i] for i in TILT_MODES},
+        return {"k1": k1, "b1": b1, "stiffness": {i: k1 * u.stiffness[i] for i in TILT_MODES},
                 "damping": {i: b1 * u.damping[i] for i in TILT_MODES},
                 "mass": {i: u.mass[i] for i in TILT_MODES},
                 "force_spring": {i: k1 * u.force_spring[i] for i in TILT_MODES},
                 "force_damper": {i: b1 * u.force_damper[i] for i in TILT_MODES}}
 
-    def _tilt_steady_state(self, tilt: dict, drive: Drive) -> np.ndarray:
-        """Exact steady state of the tilt coordinates (rx, ry) under the drive, shape (T, 2): as
-        `forward.motion.frame.steady_state`, for the two rows the pixel sees."""
-        q = np.zeros((self.t.size, 2))
-        for w, ph in zip(2 * np.pi * drive.frequencies, drive.phasors()):
-            e = np.exp(1j * w * self.t)
-            for col, i in enumerate(TILT_MODES):
-                force = (tilt["force_spring"][i] + 1j * w * tilt["force_damper"][i]) @ ph
-                qh = force / (tilt["stiffness"][i] - w * w * tilt["mass"][i] + 1j * w * tilt["damping"][i])
-                q[:, col] += (qh * e).real
-        return q
+    def _tilt_phasors(self, tilt: dict, w: np.ndarray, amp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Complex steady-state amplitudes of rx and ry per drive line (exact, as
+        `forward.motion.frame.steady_state` for the two rows the pixel sees): the base phasor
+        A e^{i phase} (d1 - i d2) at the drive corner through H(i w) of each tilt mode."""
+        out = []
+        for i in TILT_MODES:
+            spring, damper = self._corner_force[i]
+            force = (tilt["k1"] * spring + 1j * w * tilt["b1"] * damper) * amp
+            out.append(force / (tilt["stiffness"][i] - w * w * tilt["mass"][i] + 1j * w * tilt["damping"][i]))
+        return out[0], out[1]
+
+    def _drive_mean(self, w: np.ndarray, qx: np.ndarray, qy: np.ndarray, x0: float, jac: np.ndarray,
+                    hs: np.ndarray) -> np.ndarray:
+        """x0 + J g + g'Hg/2 with g = (-ry, rx), r = Re(q e^{i w t}) summed over the lines."""
+        if self._grid is not None:  # uniform grid: the compiled kernel (rotations, re-anchored)
+            out = np.empty(self.t.size)
+            _drive_mean_kernel(self.t, self._grid, w, qx, qy, x0, jac[0], jac[1], hs[0, 0], hs[0, 1], hs[1, 1], out)
+            return out
+        e = np.exp(1j * np.outer(self.t, w))
+        rx, ry = (e @ qx).real, (e @ qy).real
+        gx, gy = -ry, rx
+        return x0 + jac[0] * gx + jac[1] * gy + 0.5 * (hs[0, 0] * gx * gx + 2 * hs[0, 1] * gx * gy + hs[1, 1] * gy * gy)
 
     def fittable(self) -> set[str]:
-        """The names this likelihood reads: frame dynamics, drive lines, base noise, sensor noise.
-        (Geometry and optics are held at the scene's values: the observation is built once.)"""
+        """The names this likelihood reads: frame dynamics, drive lines, base noise, sensor noise,
+        and the geometry and optics of the observation (`observation`)."""
         k = self.key
         names = {k + n for n in ("tilt_frequency", "tilt_damping_ratio", "lateral_frequency", "lateral_damping_ratio",
-                                 "noise_rms")} | {"noise.sigma"}
+                                 "noise_rms")} | {"noise.sigma"} | self._geometry
         lines = len(self.base["surfaces"][self.roof]["motion"].get("drive_frequency", []) or [])
         for n in ("drive_frequency", "drive_amplitude", "drive_phase"):
             names |= {f"{k}{n}[{i}]" for i in range(lines)} | ({k + n} if lines else set())
@@ -235,9 +289,43 @@ class FrameLikelihood:
             self._fixed[key] = get_value(self.base, key)
         return self._fixed[key]
 
+    def mean(self, values: dict[str, float]) -> np.ndarray:
+        """The drive's deterministic response x(t) at the given values."""
+        return self.components(values).mean
+
     def log_likelihood(self, values: dict[str, float]) -> float:
         c = self.components(values)
         return log_likelihood(self.series.intensity - c.mean, c.phi, c.q, c.h, c.r, c.p0)
+
+
+_ANCHOR = 64  # samples between exact re-anchors of the rotation recurrence
+
+
+@njit(cache=True)
+def _drive_mean_kernel(t, dt, w, qx, qy, x0, jx, jy, hxx, hxy, hyy, out):  # pragma: no cover - compiled
+    """out[k] = x0 + J g + g'Hg/2 at t[k] on a uniform grid of step dt, g = (-ry, rx), (rx, ry) =
+    Re((qx, qy) e^{i w t}). e^{i w t} advances by a rotation of w dt per sample and is recomputed
+    exactly at t[k] every _ANCHOR samples, so the rounding never grows past ~_ANCHOR ulps (and the
+    grid's deviation, <= 1e-9 dt, past w * _ANCHOR * 1e-9 dt); one pass, no temporaries."""
+    n_lines = w.shape[0]
+    c = np.empty(n_lines)
+    s = np.empty(n_lines)
+    rc = np.cos(w * dt)
+    rs = np.sin(w * dt)
+    for k in range(out.shape[0]):
+        if k % _ANCHOR == 0:
+            for m in range(n_lines):
+                c[m] = np.cos(w[m] * t[k])
+                s[m] = np.sin(w[m] * t[k])
+        rx = 0.0
+        ry = 0.0
+        for m in range(n_lines):
+            rx += qx[m].real * c[m] - qx[m].imag * s[m]
+            ry += qy[m].real * c[m] - qy[m].imag * s[m]
+            c[m], s[m] = c[m] * rc[m] - s[m] * rs[m], s[m] * rc[m] + c[m] * rs[m]
+        gx = -ry
+        gy = rx
+        out[k] = x0 + jx * gx + jy * gy + 0.5 * (hxx * gx * gx + 2.0 * hxy * gx * gy + hyy * gy * gy)
 
 
 def stationary_2x2_entries(phi: Any, q: Any) -> tuple[Any, Any, Any]:

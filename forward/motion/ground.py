@@ -10,8 +10,10 @@ Continuity with the piston u = A0 cos(wt - phi) for r < R (eq. (20)) fixes, in c
     C = A0 / (pi |H0(kR)|),   phi = atan2(J0(kR), -Y0(kR)).
 
 For r >= R the surface slope is du/dr = C pi k [-J1(kr) sin(wt) + Y1(kr) cos(wt)] along r-hat;
-inside R the piston is flat (slope 0). Several frequencies superpose. The slope field is
-sin(wt) * shape_s + cos(wt) * shape_c per frequency: a modal motion with two modes each.
+inside R the piston is flat (slope 0). Several frequencies superpose, each with an optional phase
+(wt -> wt + phase: the source's time origin, which a fit of measured data needs). The slope field
+is A0 sin(wt + phase) * shape_s + A0 cos(wt + phase) * shape_c per frequency, shapes per unit A0:
+a modal motion with two modes each, whose amplitudes live in the modal coordinates.
 """
 
 from __future__ import annotations
@@ -70,11 +72,12 @@ def continuity(radius: float, k: float, amplitude: float) -> tuple[float, float]
 class RayleighMotion(ModalMotion):
     """Ground displacement (20) about `center`: piston of radius R inside, outgoing waves outside.
 
-    frequencies (Hz), amplitudes A0 (m) at the piston, wave_speed v_R (m/s).
+    frequencies (Hz), amplitudes A0 (m) at the piston, wave_speed v_R (m/s), phases (rad, default 0).
     """
 
     def __init__(self, center: tuple[float, float], radius: float, wave_speed: float,
-                 frequencies: NDArray[np.float64], amplitudes: NDArray[np.float64]):
+                 frequencies: NDArray[np.float64], amplitudes: NDArray[np.float64],
+                 phases: NDArray[np.float64] | None = None):
         if not radius > 0:
             raise SceneError(f"rayleigh.radius: {radius:g} is outside the allowed range (0, inf)")
         if not wave_speed > 0:
@@ -84,9 +87,15 @@ class RayleighMotion(ModalMotion):
         self.wave_speed = float(wave_speed)
         self.frequencies = np.atleast_1d(np.asarray(frequencies, dtype=float))
         self.amplitudes = np.atleast_1d(np.asarray(amplitudes, dtype=float))
+        self.phases = (np.zeros(self.frequencies.size) if phases is None
+                       else np.atleast_1d(np.asarray(phases, dtype=float)))
+        if not (self.frequencies.size == self.amplitudes.size == self.phases.size):
+            raise SceneError(f"rayleigh: needs one amplitude and phase per frequency ({self.frequencies.size}), "
+                             f"got {self.amplitudes.size} and {self.phases.size}")
         self.omega = 2 * np.pi * self.frequencies
         self.k = self.omega / self.wave_speed
-        self.c = np.array([continuity(self.radius, k, a)[0] for k, a in zip(self.k, self.amplitudes)])
+        self.c_unit = np.array([continuity(self.radius, k, 1.0)[0] for k in self.k])  # C per unit A0
+        self.c = self.c_unit * self.amplitudes
 
     def wavelength(self) -> NDArray[np.float64]:
         return self.wave_speed / self.frequencies
@@ -96,9 +105,10 @@ class RayleighMotion(ModalMotion):
         r = np.asarray(r, dtype=float)
         t = np.asarray(t, dtype=float)
         out = 0.0
-        for k, w, c, a in zip(self.k, self.omega, self.c, self.amplitudes):
+        for k, w, c, a, ph in zip(self.k, self.omega, self.c, self.amplitudes, self.phases):
             phi = continuity(self.radius, k, a)[1]
-            out = out + np.where(r < self.radius, a * np.cos(w * t - phi), c * green_2d(np.maximum(r, self.radius), t, k, w))
+            ts = t + ph / w
+            out = out + np.where(r < self.radius, a * np.cos(w * ts - phi), c * green_2d(np.maximum(r, self.radius), ts, k, w))
         return out
 
     def radial_slope(self, r: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -106,9 +116,9 @@ class RayleighMotion(ModalMotion):
         r = np.asarray(r, dtype=float)
         t = np.asarray(t, dtype=float)
         out = 0.0
-        for k, w, c in zip(self.k, self.omega, self.c):
+        for k, w, c, ph in zip(self.k, self.omega, self.c, self.phases):
             kr = k * np.maximum(r, self.radius)
-            d = c * np.pi * k * (-j1(kr) * np.sin(w * t) + y1(kr) * np.cos(w * t))
+            d = c * np.pi * k * (-j1(kr) * np.sin(w * t + ph) + y1(kr) * np.cos(w * t + ph))
             out = out + np.where(r < self.radius, 0.0, d)
         return out
 
@@ -120,18 +130,19 @@ class RayleighMotion(ModalMotion):
         rs = np.where(outside, r, 1.0)
         ux, uy = np.where(outside, dx / rs, 0.0), np.where(outside, dy / rs, 0.0)
         modes = []
-        for k, c in zip(self.k, self.c):
+        for k, c in zip(self.k, self.c_unit):
             kr = k * np.where(outside, r, self.radius)
             g_sin, g_cos = -c * np.pi * k * j1(kr), c * np.pi * k * y1(kr)
             modes += [np.stack([g_sin * ux, g_sin * uy]), np.stack([g_cos * ux, g_cos * uy])]
         return np.array(modes)
 
     def shape_key(self) -> tuple:
-        return ("rayleigh", *self.center, self.radius, self.wave_speed, *self.frequencies, *self.amplitudes)
+        return ("rayleigh", *self.center, self.radius, self.wave_speed, *self.frequencies)
 
     def coefficients(self, t):
-        wt = np.outer(np.asarray(t, dtype=float), self.omega)
-        return np.stack([np.sin(wt), np.cos(wt)], axis=2).reshape(wt.shape[0], -1)
+        wt = np.outer(np.asarray(t, dtype=float), self.omega) + self.phases
+        q = np.stack([np.sin(wt), np.cos(wt)], axis=2) * self.amplitudes[:, None]  # (T, F, 2)
+        return q.reshape(wt.shape[0], -1)
 
     def max_frequency(self) -> float:
         return float(self.frequencies.max())
@@ -139,7 +150,7 @@ class RayleighMotion(ModalMotion):
     @classmethod
     def from_table(cls, t: Table, x_range: tuple[float, float], y_range: tuple[float, float]) -> "RayleighMotion":
         """Scene table: center [x, y] (m), radius R (m), wave_speed v_R (m/s), frequency and
-        amplitude (numbers or equal-length lists; Hz and m)."""
+        amplitude, optional phase (numbers or equal-length lists; Hz, m, rad)."""
         center = t.numbers("center", [0.0, 0.0])
         if len(center) != 2:
             raise SceneError(f"{t.path('center')}: must be [x, y] in m")
@@ -149,5 +160,8 @@ class RayleighMotion(ModalMotion):
         amps = np.array(t.numbers("amplitude", lo=0.0))
         if freqs.size == 0 or freqs.size != amps.size:
             raise SceneError(f"{t.path('amplitude')}: needs one amplitude per frequency ({freqs.size}), got {amps.size}")
-        return cls(center, radius, speed, freqs, amps)
+        phases = np.array(t.numbers("phase", [0.0] * freqs.size))
+        if phases.size != freqs.size:
+            raise SceneError(f"{t.path('phase')}: needs one phase per frequency ({freqs.size}), got {phases.size}")
+        return cls(center, radius, speed, freqs, amps, phases)
 

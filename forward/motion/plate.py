@@ -102,19 +102,22 @@ class PlateMotion(ModalMotion):
         return self._shape(x, y)[0]
 
     def shapes(self, x, y):
-        _, sx, sy = self._shape(x, y)
+        """Slopes of w (q = 1): the amplitude q lives in the modal coordinate, so that the shape
+        is shared by every amplitude (a fit varies q without recomputing the series)."""
+        _, sx, sy = self._shape(x, y, 1.0)
         return np.stack([sx, sy])[None]
 
     def shape_key(self) -> tuple:
-        return ("plate", self.x0, self.x1, self.y0, self.y1, self.q)
+        return ("plate", self.x0, self.x1, self.y0, self.y1)
 
     def coefficients(self, t):
-        return np.cos(2 * np.pi * self.frequency * np.asarray(t, dtype=float) + self.phase)[:, None]
+        return self.q * np.cos(2 * np.pi * self.frequency * np.asarray(t, dtype=float) + self.phase)[:, None]
 
     def max_frequency(self) -> float:
         return self.frequency
 
-    def _shape(self, x, y):
+    def _shape(self, x, y, q: float | None = None):
+        q = self.q if q is None else q
         x = np.asarray(x, dtype=float)
         y = np.asarray(y, dtype=float)
         inside = (x >= self.x0) & (x <= self.x1) & (y >= self.y0) & (y <= self.y1)
@@ -123,7 +126,7 @@ class PlateMotion(ModalMotion):
             vals = poisson_shape(x[inside] - self.x0, y[inside] - self.y0,
                                  self.x1 - self.x0, self.y1 - self.y0)
             for o, v in zip(out, vals):
-                o[inside] = self.q * v
+                o[inside] = q * v
         return tuple(out)
 
     @classmethod

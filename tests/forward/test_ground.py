@@ -47,6 +47,24 @@ def test_slopes_are_the_gradient_of_the_displacement_and_superpose():
     np.testing.assert_allclose(gx, one[0].slopes(x, y, t)[0] + one[1].slopes(x, y, t)[0], rtol=1e-12)
 
 
+def test_a_source_phase_is_a_time_shift_and_the_slopes_stay_the_gradient():
+    f, ph = np.array([40.0, 55.0]), np.array([0.7, -2.1])
+    m = RayleighMotion((3.0, -2.0), 5.0, 3000.0, f, np.array([1e-3, 4e-4]), ph)
+    x, y = np.array([10.0, 30.0, -20.0]), np.array([4.0, -25.0, 7.0])
+    t = np.array([0.0, 0.004, 0.013])
+    gx, gy = m.slopes(x, y, t)
+    h = 1e-4
+    u = lambda xx, yy: m.displacement(np.hypot(xx - 3.0, yy + 2.0)[None, :], t[:, None])
+    np.testing.assert_allclose(gx, (u(x + h, y) - u(x - h, y)) / (2 * h), rtol=1e-6, atol=1e-12)
+    for i in range(2):  # each line alone: phase p at t is no phase at t + p / omega
+        shifted = RayleighMotion((3.0, -2.0), 5.0, 3000.0, f[i:i + 1], np.array([1.0]), ph[i:i + 1])
+        plain = RayleighMotion((3.0, -2.0), 5.0, 3000.0, f[i:i + 1], np.array([1.0]))
+        np.testing.assert_allclose(shifted.slopes(x, y, t)[0], plain.slopes(x, y, t + ph[i] / (2 * np.pi * f[i]))[0],
+                                   rtol=1e-9, atol=1e-15)
+    with pytest.raises(SceneError, match="phase"):
+        RayleighMotion((0.0, 0.0), 5.0, 3000.0, f, np.array([1e-3, 4e-4]), np.array([0.1]))
+
+
 def test_centre_and_tiny_source_are_finite():
     m = RayleighMotion((0.0, 0.0), 1e-6, 3000.0, np.array([40.0]), np.array([1e-3]))
     gx, gy = m.slopes(np.array([0.0, 1e-7, 1e-3, 1.0]), np.array([0.0, 0.0, 0.0, 0.0]), np.array([0.0, 0.01]))

@@ -1,8 +1,10 @@
 """Likelihood speed, side by side in one run: our frame log-likelihood (T = 4000) and celerite2's SHO
-log-likelihood on a series of the same length; and the demo's MCMC wall time to convergence."""
+log-likelihood on a series of the same length; the deterministic-scene likelihood against dense
+rendering; and the demo's MCMC wall time to convergence."""
 
 from __future__ import annotations
 
+import json
 import tempfile
 import time
 import timeit
@@ -74,3 +76,37 @@ def demo_mcmc_row(scene_path: Path, log=print) -> dict:
         f"converged {diag['converged']}, R-hat {diag['rhat_max']:.3f}")
     return {"wall_s": wall, "mcmc_s": summary["timing"]["mcmc_s"], "n_steps": diag["n_steps"],
             "converged": diag["converged"], "rhat_max": diag["rhat_max"], "ess_min": diag["ess_min"]}
+
+
+def response_fit_row(scene_path: Path, log=print) -> dict:
+    """The deterministic-scene likelihood (elastic roof, sec. 4.1): one evaluation of ours (Taylor
+    mean re-formed for new motion values) against rendering every subpixel at every sample, the
+    error of ours against that reference relative to the noise, and a MAP fit's time and errors."""
+    from forward.render import pixel_signal
+    from forward.scene_file import scene_from_table
+    from vibinverse.fit import free_defaults
+    from vibinverse.frame_model import set_value
+
+    scene, table = load_scene(scene_path, [])
+    o = observe(scene, seed=1)
+    series = validate(o.time, o.intensity, "bench", table)
+    prob = Problem(table, series, free_defaults(table, series))
+    values = {**prob.truth(), "surfaces.roof.motion.frequency": 40.3, "surfaces.roof.motion.center_deflection": 1.2e-3}
+    ours = _best(lambda: prob.like.log_likelihood(values))
+    other = json.loads(json.dumps(table))
+    for n, v in values.items():
+        if n != "noise.sigma":
+            set_value(other, n, v)
+    t0 = time.perf_counter()
+    dense = pixel_signal(scene_from_table(other), series.time)
+    dense_us = (time.perf_counter() - t0) * 1e6
+    error = float(np.abs(prob.like.mean(values) - dense).max()) / scene.noise.sigma
+    t0 = time.perf_counter()
+    summary, _ = run_fit(prob, "map", progress=False)
+    map_s = time.perf_counter() - t0
+    z = {n: (p["median"] - p["truth"]) / p["sd"] for n, p in summary["parameters"].items() if p["sd"]}
+    log(f"  elastic roof, {series.time.size} samples: ours {ours:.0f} us per log-likelihood, dense rendering "
+        f"{dense_us / 1e3:.0f} ms ({dense_us / ours:.0f}x); max error {error:.1e} x sigma; MAP {map_s:.1f} s, "
+        f"errors {min(z.values()):+.1f} .. {max(z.values()):+.1f} sd")
+    return {"samples": int(series.time.size), "ours_us": ours, "dense_us": dense_us, "speedup": dense_us / ours,
+            "max_error_over_sigma": error, "map_s": map_s, "map_error_sd": z}

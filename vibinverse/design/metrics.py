@@ -23,24 +23,20 @@ import numpy as np
 from forward.errors import SceneError
 from forward.motion.frame import FrameMotion
 from forward.motion import MOTION_KINDS
-from forward.reduce import compile_scene, modal_points, surface_derivatives, taylor_ac, taylor_coefficients
+from forward.reduce import compile_scene, footprint_layout, taylor_surface_ac
 from forward.validation import Table
 from forward.scene import Noise, Scene
 from forward.scene_file import scene_from_table
 from vibinverse.data import Series
 from vibinverse.fisher import crlb_from_fisher, frame_fisher, spectrum_at
 from vibinverse.estimators.spectral import sinusoid
-from vibinverse.frame_model import FrameLikelihood, frame_surface, get_value, modal_table, set_value
+from vibinverse.frame_model import FrameLikelihood, frame_surface, get_value, is_frame, modal_table, set_value
 
 # Design evaluates every configuration with the second-order (Taylor) reduced model: one model
 # for a configuration and its perturbations, so that derivatives are smooth, at ~ms per scene.
 # Its error estimate (relative to the peak-to-peak signal) is reported per row as model_error.
 DESIGN_MODEL = "taylor2"
 _AMPLITUDE_KEYS = ("center_deflection", "amplitude", "pressure", "boundary_amplitude")
-
-
-def is_frame(table: dict) -> bool:
-    return any((s.get("motion") or {}).get("kind") == "frame" for s in (table.get("surfaces") or {}).values())
 
 
 def default_targets(table: dict) -> list[str]:
@@ -147,29 +143,10 @@ def _deterministic_metrics(table: dict, scene: Scene, targets: list[str], cache:
             if h * f < fs / 2:
                 row[f"snr {h * f:g} Hz{label}"] = line_amplitude(t, ac, h * f) / np.sqrt(2 * var / n)
     names = [*targets, "sampling.start"]
-    moving = _moving(scene, cache)
+    moving = footprint_layout(scene, cache).moving
     d = np.array([np.ones(n)] + [_mean_derivative(table, scene, name, moving, cache) for name in names])
     crlb = crlb_from_fisher(d @ d.T / var, ["dc", *names])
     return {**row, **_bounds(table, targets, crlb)}
-
-
-def _moving(scene: Scene, cache: dict) -> list[tuple[int, np.ndarray, np.ndarray, float, dict]]:
-    """(index, x, y, weight, facet derivatives) of every moving surface."""
-    x, y = scene.footprint.subpixels()
-    owner = scene.owners(x, y)
-    out = []
-    for k, s in enumerate(scene.surfaces):
-        idx = np.flatnonzero(owner == k)
-        if s.motion is not None and idx.size:
-            out.append((k, x[idx], y[idx], idx.size / x.size, surface_derivatives(s, scene, cache)))
-    return out
-
-
-def _surface_ac(motion: Any, x: np.ndarray, y: np.ndarray, d: dict, t: np.ndarray, cache: dict) -> np.ndarray:
-    """J q + q^T H q / 2 of one surface: the reduced model's AC part (`forward.reduce`)."""
-    sx, sy, w = modal_points(motion, x, y, cache)
-    jac, hess = taylor_coefficients(d, sx, sy, w)
-    return taylor_ac(jac, hess, motion.coefficients(t).T)
 
 
 def _mean_derivative(table: dict, scene: Scene, name: str, moving: list, cache: dict) -> np.ndarray:
@@ -183,7 +160,7 @@ def _mean_derivative(table: dict, scene: Scene, name: str, moving: list, cache: 
         out = np.zeros(t.size)
         for k, x, y, weight, d in moving:
             m = scene.surfaces[k].motion
-            out += irr * weight * (_surface_ac(m, x, y, d, t + h, cache) - _surface_ac(m, x, y, d, t - h, cache)) / (2 * h)
+            out += irr * weight * (taylor_surface_ac(m, x, y, d, t + h, cache) - taylor_surface_ac(m, x, y, d, t - h, cache)) / (2 * h)
         return out
     parts = name.split(".")
     if len(parts) >= 4 and parts[0] == "surfaces" and parts[2] == "motion":
@@ -193,7 +170,7 @@ def _mean_derivative(table: dict, scene: Scene, name: str, moving: list, cache: 
         for kk, x, y, weight, d in moving:
             if kk == k:
                 up, dn = (_motion_with(table, scene.surfaces[k], name, v + s * h) for s in (1, -1))
-                return irr * weight * (_surface_ac(up, x, y, d, t, cache) - _surface_ac(dn, x, y, d, t, cache)) / (2 * h)
+                return irr * weight * (taylor_surface_ac(up, x, y, d, t, cache) - taylor_surface_ac(dn, x, y, d, t, cache)) / (2 * h)
         return np.zeros(t.size)  # the surface is outside the footprint
     v = get_value(table, name)  # any other scene value: re-compile the scene at name +- h
     h = _step(name, v, scene.sampling.fs)

@@ -27,7 +27,9 @@ def hessian(f, z: np.ndarray, steps: np.ndarray) -> np.ndarray:
 def map_fit(problem: Problem, start: dict[str, float], restarts: int = 2, seed: int = 0) -> dict:
     """MAP in the unconstrained space from `start` and jittered restarts; Laplace covariance.
 
-    Returns {"z", "values", "cov_z", "sd", "log_post", "n_evals"}; sd is in value units (delta method).
+    Returns {"z", "values", "cov_z", "sd", "log_post", "n_evals", "hessian_ok"}; sd is in value units
+    (delta method); hessian_ok is False when the Hessian was not positive definite and the sds are
+    the conditional ones of its diagonal.
     """
     rng = np.random.default_rng(seed)
     neg = lambda z: -problem.log_posterior(z) if np.all(np.isfinite(z)) else np.inf
@@ -44,15 +46,17 @@ def map_fit(problem: Problem, start: dict[str, float], restarts: int = 2, seed: 
     z = best.x
     steps = 1e-4 * np.maximum(1.0, np.abs(z))
     h = hessian(neg, z, steps)
+    ok = True
     try:
         cov = np.linalg.inv(h)
         cov = 0.5 * (cov + cov.T)
         if np.any(np.linalg.eigvalsh(cov) <= 0):
             raise np.linalg.LinAlgError
-    except np.linalg.LinAlgError:
+    except np.linalg.LinAlgError:  # conditional sds only: they understate correlated parameters
+        ok = False
         cov = np.diag(1.0 / np.maximum(np.abs(np.diag(h)), 1e-12))
     # delta method: d value / d z per parameter
     jac = np.array([np.exp(p.log_jacobian(float(v))) for p, v in zip(problem.space.priors, z)])
     sd = np.sqrt(np.diag(cov)) * jac
     return {"z": z, "values": problem.values(z), "cov_z": cov, "sd": dict(zip(problem.space.names, sd)),
-            "log_post": -best.fun, "n_evals": evals}
+            "log_post": -best.fun, "n_evals": evals, "hessian_ok": ok}

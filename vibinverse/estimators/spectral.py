@@ -27,7 +27,7 @@ def periodogram(series: Series, pad: int = 4) -> tuple[np.ndarray, np.ndarray]:
     t = series.time[good]
     span = t[-1] - t[0]
     freqs = np.linspace(0.5 / span, 0.5 * series.fs, int(pad * span * series.fs / 2))
-    return freqs, lombscargle(t, y[good], 2 * np.pi * freqs, precenter=True)
+    return freqs, lombscargle(t, y[good], 2 * np.pi * freqs)  # y is de-meaned over the valid samples
 
 
 def sinusoid(t: np.ndarray, y: np.ndarray, f: float) -> tuple[float, float, np.ndarray]:

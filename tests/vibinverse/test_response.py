@@ -1,0 +1,207 @@
+"""Fitting deterministic scenes (plate roof, ground waves): the white-noise likelihood on the reduced
+forward model, its spectral starts, MAP/MCMC, detection, gaps, sampling and the hard cases."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from forward.errors import SceneError
+from forward.reduce import compile_scene
+from forward.render import pixel_signal
+from forward.scene_file import load_scene, scene_from_table
+from forward.sensor import observe
+from tests.conftest import SCENES
+from vibinverse.data import validate
+from vibinverse.design.metrics import evaluate
+from vibinverse.fit import free_defaults, run_fit
+from vibinverse.frame_model import set_value
+from vibinverse.params import Prior
+from vibinverse.problem import Problem
+from vibinverse.response_model import ResponseLikelihood
+
+R = "surfaces.roof.motion."
+G = "surfaces.ground.motion."
+LOW_RES = "footprint.resolution=32"  # 1024 subpixels: the dense oracle stays cheap
+
+
+def simulate(name, *overrides, seed=0, truth_overrides=(), gaps=0.0, keep=None):
+    """(analyst's scene table, Series) of a simulated scene; `truth_overrides` change only the scene
+    the data come from, `keep` selects samples (non-uniform sampling)."""
+    scene, table = load_scene(SCENES / f"{name}.toml", [*overrides, *truth_overrides])
+    _, analyst = load_scene(SCENES / f"{name}.toml", list(overrides))
+    o = observe(scene, seed)
+    t, y = o.time, o.intensity.copy()
+    if gaps:
+        y[np.random.default_rng(seed).random(y.size) < gaps] = np.nan
+    if keep is not None:
+        t, y = t[keep], y[keep]
+    return analyst, validate(t, y, "sim", table)
+
+
+def fitted(table, series, method="map", **kw):
+    problem = Problem(table, series, free_defaults(table, series))
+    summary, _ = run_fit(problem, method, progress=False, **kw)
+    return problem, summary
+
+
+def z_scores(summary):
+    return {n: (p["median"] - p["truth"]) / p["sd"] for n, p in summary["parameters"].items()}
+
+
+# ------------------------------------------------------------------ the mean against the forward model
+
+def test_mean_equals_the_dense_forward_model_away_from_the_scene_values():
+    """The likelihood's mean re-formed for new motion values (frequency, amplitude, phase, gain)
+    equals every-subpixel rendering of the scene with those values, to the Taylor bound."""
+    table, series = simulate("roof_elastic", LOW_RES)
+    like = ResponseLikelihood(table, series)
+    values = {R + "frequency": 41.3, R + "center_deflection": 2e-3, R + "phase": 0.8, "sun.irradiance": 1.7}
+    other = json.loads(json.dumps(table))
+    for n, v in values.items():
+        set_value(other, n, v)
+    dense = pixel_signal(scene_from_table(other), series.time)
+    mu = like.mean(values)
+    bound = like.taylor_error(values)
+    assert np.max(np.abs(mu - dense)) <= 1.7 * bound + 1e-12 * np.abs(dense).max()
+    assert np.ptp(dense) > 1e3 * bound  # the check is not vacuous
+
+
+def test_geometry_values_rebuild_the_scene():
+    """Sun and view angles and the lobe width are fittable: the mean is the compiled scene there."""
+    table, series = simulate("roof_elastic", LOW_RES)
+    like = ResponseLikelihood(table, series)
+    values = {"sun.inclination": 1.02, "surfaces.roof.lobe_width": 0.012, R + "center_deflection": 1.5e-3}
+    other = json.loads(json.dumps(table))
+    for n, v in values.items():
+        set_value(other, n, v)
+    ref = compile_scene(scene_from_table(other), series.time, force="taylor2").signal()
+    np.testing.assert_allclose(like.mean(values), ref, rtol=1e-12)
+    assert not np.allclose(like.mean(values), like.mean({}), rtol=1e-3)  # the angles matter
+
+
+def test_log_likelihood_is_the_gaussian_density_with_shot_noise():
+    table, series = simulate("roof_elastic", LOW_RES, "noise.photons_per_unit=1e4")
+    like = ResponseLikelihood(table, series)
+    mu = like.mean({})
+    var = 0.05**2 + mu / 1e4
+    r = series.intensity - mu
+    expected = -0.5 * np.sum(r * r / var + np.log(2 * np.pi * var))
+    assert like.log_likelihood({}) == pytest.approx(expected, rel=1e-12)
+
+
+# ------------------------------------------------------------------ fits
+
+def test_plate_map_recovers_the_truth_and_its_sd_is_the_cramer_rao_bound():
+    table, series = simulate("roof_elastic", seed=4)
+    problem, summary = fitted(table, series)
+    assert all(abs(z) < 3.0 for z in z_scores(summary).values()), z_scores(summary)
+    crb = evaluate(table, [R + "frequency", R + "center_deflection"], {})
+    for n in (R + "frequency", R + "center_deflection"):
+        # the Laplace sd at the fitted sigma against the bound at the true sigma: sigma's own
+        # estimate scatters by 1/sqrt(2N) = 3 %; the nuisances differ (gain and phase vs DC and time)
+        assert summary["parameters"][n]["sd"] / crb[f"crlb {n}"] == pytest.approx(1.0, abs=0.12)
+    assert summary["diagnostics"]["vibration_detected"]
+    assert summary["data"]["model"]["kind"] == "taylor2"
+
+
+def test_ground_wave_mcmc_intervals_contain_the_truth(tmp_path):
+    table, series = simulate("ground_rayleigh", LOW_RES, "noise.sigma=3e-6", seed=2)
+    problem, summary = fitted(table, series, "mcmc", backend=tmp_path / "c.h5", max_steps=3000)
+    for n in (G + "frequency[0]", G + "amplitude[0]", G + "phase[0]", "noise.sigma"):
+        p = summary["parameters"][n]
+        assert p["q05"] <= p["truth"] <= p["q95"], (n, p)
+    assert summary["diagnostics"]["converged"]
+
+
+def test_a_vibration_absent_from_the_data_is_not_detected():
+    table, series = simulate("roof_elastic", truth_overrides=("surfaces.roof.motion.center_deflection=0",), seed=5)
+    _, summary = fitted(table, series)
+    d = summary["diagnostics"]
+    assert not d["vibration_detected"] and d["vibration_delta_loglike"] < d["vibration_threshold"]
+
+
+def test_ten_percent_gaps_and_non_uniform_sampling():
+    rng = np.random.default_rng(1)
+    keep = np.sort(rng.choice(500, size=400, replace=False))  # a fifth of the samples never taken
+    table, series = simulate("roof_elastic", seed=6, gaps=0.1, keep=keep)
+    assert not series.uniform and series.n_gaps > 20
+    _, summary = fitted(table, series)
+    assert all(abs(z) < 3.0 for z in z_scores(summary).values()), z_scores(summary)
+    assert summary["data"]["n_gaps"] == series.n_gaps
+
+
+def test_line_near_nyquist_whose_harmonic_aliases():
+    """f = 480 Hz at fs = 1 kHz: its 2f term aliases to 40 Hz; the model samples it as the data do."""
+    table, series = simulate("roof_elastic", "surfaces.roof.motion.frequency=480", seed=7)
+    _, summary = fitted(table, series)
+    assert all(abs(z) < 3.0 for z in z_scores(summary).values()), z_scores(summary)
+
+
+@pytest.mark.parametrize("footprint, amplitude, sigma", [
+    (("footprint.x=[0.0, 50.0]", "footprint.y=[0.0, 50.0]"), 1e-9, 2e-8),  # quadrant: first order, ~1e-8 of the mean
+    (("footprint.x=[-25.0, 25.0]", "footprint.y=[-25.0, 25.0]"), 1e-6, 2e-10),  # centred: first order cancels
+])
+def test_tiny_amplitudes_on_quadrant_and_centred_footprints(footprint, amplitude, sigma):
+    """A 1e-9 m plate on the quadrant footprint, and a 1e-6 m plate on the centred one, where the
+    first order cancels and the whole signal is the 2f term, ~1e-11 of the mean level: the Taylor
+    AC keeps its digits and the fit finds the amplitude. (At 1e-9 m the centred signal is 1e-17 of
+    the mean, below float64 itself.) On the centred footprint the sign of the amplitude is not
+    observable (x ~ a^2), so the phase prior spans pi."""
+    overrides = (*footprint, f"noise.sigma={sigma}", f"surfaces.roof.motion.center_deflection={amplitude}", LOW_RES)
+    table, series = simulate("roof_elastic", *overrides, seed=8)
+    free = {R + "frequency": Prior("uniform", (30.0, 50.0)),
+            R + "center_deflection": Prior("loguniform", (amplitude / 100, amplitude * 100)),
+            R + "phase": Prior("uniform", (-np.pi / 2, np.pi / 2)), "noise.sigma": Prior("loguniform", (sigma / 10, sigma * 10))}
+    summary, _ = run_fit(Problem(table, series, free), "map", progress=False)
+    assert np.all(np.isfinite([v["median"] for v in summary["parameters"].values()]))
+    assert all(abs(z) < 3.0 for z in z_scores(summary).values()), z_scores(summary)
+    assert summary["parameters"][R + "center_deflection"]["sd"] < 0.05 * amplitude
+
+
+def test_large_amplitude_switches_to_the_compiled_model():
+    overrides = (LOW_RES, "noise.sigma=0.005")
+    table, series = simulate("roof_elastic", *overrides, truth_overrides=("surfaces.roof.motion.center_deflection=0.02",),
+                             seed=9)
+    _, summary = fitted(table, series)
+    assert summary["data"]["model"]["kind"] == "compiled"
+    assert summary["data"]["model"]["error_bound_at_fit"] > 0.1 * 0.005
+    assert all(abs(z) < 3.0 for z in z_scores(summary).values()), z_scores(summary)
+
+
+# ------------------------------------------------------------------ bad input
+
+def test_zero_noise_that_is_not_free_is_a_clear_error():
+    table, series = simulate("roof_elastic", LOW_RES)
+    table["noise"]["sigma"] = 0.0
+    with pytest.raises(SceneError, match="noise.sigma"):
+        Problem(table, series, {R + "frequency": Prior("uniform", (30.0, 50.0))})
+
+
+def test_cli_fits_a_plate_and_refuses_sindy(tmp_path):
+    scene = SCENES / "roof_elastic.toml"
+    data = tmp_path / "plate.csv"
+    run = lambda *a: subprocess.run([sys.executable, "-m", "vibinverse.cli", *map(str, a)], capture_output=True, text=True)
+    assert run("simulate", scene, "--seed", "3", "--set", LOW_RES, "-o", data).returncode == 0
+    out = run("fit", data, "--scene", scene, "--set", LOW_RES, "--method", "map", "-o", tmp_path / "r.nc",
+              "--summary", tmp_path / "r.json")
+    assert out.returncode == 0, out.stderr
+    summary = json.loads((tmp_path / "r.json").read_text())
+    assert summary["parameters"][R + "frequency"]["truth"] == 40.0
+    bad = run("fit", data, "--scene", scene, "--method", "sindy", "-o", tmp_path / "s.nc", "--summary", tmp_path / "s.json")
+    assert bad.returncode == 2 and "sindy" in bad.stderr and "Traceback" not in bad.stderr
+    assert not (tmp_path / "s.nc").exists()
+
+
+def test_default_priors_partition_the_band_between_lines_and_centre_the_phase():
+    table, series = simulate("ground_rayleigh", LOW_RES, "noise.sigma=3e-6", "surfaces.ground.motion.frequency=[40.0, 55.0]",
+                             "surfaces.ground.motion.amplitude=[1e-3, 5e-4]", "surfaces.ground.motion.phase=[0.0, 3.0]")
+    free = free_defaults(table, series)
+    f0, f1 = free[G + "frequency[0]"].bounds, free[G + "frequency[1]"].bounds
+    assert f0[1] == f1[0] == pytest.approx(47.5) and f1[1] == pytest.approx(500.0)
+    assert free[G + "amplitude[1]"].bounds == (0.0, pytest.approx(0.05))
+    for i, phase in enumerate((0.0, 3.0)):  # each window is 2 pi wide, centred within 0.5 rad of the true angle
+        lo, hi = free[f"{G}phase[{i}]"].bounds
+        assert hi - lo == pytest.approx(2 * np.pi) and abs(np.angle(np.exp(1j * (phase - 0.5 * (lo + hi))))) < 0.5

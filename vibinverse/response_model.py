@@ -1,0 +1,280 @@
+"""The likelihood of a pixel series from a deterministic vibration (paper secs. 4.1 and 4.3):
+y(t) = x(t; theta) + white sensor noise.
+
+The mean is the forward model's second-order reduced model (`forward.reduce`, the Taylor form of
+eq. (23) over the footprint), re-formed per evaluation from what changed:
+- a motion parameter (frequency, amplitude, phase of a plate or a Rayleigh source) rebuilds only
+  that motion: amplitudes and phases live in the modal coordinates, so the shapes are reused;
+  a parameter a shape depends on (a Rayleigh frequency or wave speed) recomputes that shape once;
+- `sun.irradiance` scales the whole signal;
+- any other scene value (sun and view angles, lobe width, footprint, surface extents) rebuilds the
+  scene and its facet derivatives (~1 ms): geometry and optics can be fitted too.
+The sensor noise is Gaussian with variance sigma^2, plus shot noise at the mean level and the
+ADC's step^2 / 12 when the scene's [noise] has them. Gaps (NaN) are skipped; any sampling works.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from typing import Any, Iterator
+
+import numpy as np
+
+from forward.errors import SceneError
+from forward.motion import MOTION_KINDS
+from forward.motion.base import ModalMotion
+from forward.reduce import DEFAULT_RTOL, compile_scene, footprint_layout, taylor_surface_ac
+from forward.scene_file import scene_from_table
+from forward.validation import Table, expression
+from vibinverse.data import Series
+from vibinverse.frame_model import get_value, set_value
+
+# values a fit cannot meaningfully free: they shape the computation, not the world
+_NOT_FITTABLE = ("sampling.", "infer.", "title", "footprint.resolution", "noise.")
+_AMPLITUDE_KEYS = ("center_deflection", "amplitude", "pressure", "boundary_amplitude")
+TAYLOR_TOLERANCE = 0.1  # the Taylor model is used when its error bound is below this x the noise sd
+
+
+class _Bounded(dict):
+    """A dict that keeps its `size` newest entries (shapes and facet derivatives met while
+    sampling would otherwise pile up)."""
+
+    def __init__(self, size: int = 64):
+        super().__init__()
+        self.size = size
+
+    def __setitem__(self, key: Any, value: Any) -> None:
+        if key not in self and len(self) >= self.size:
+            del self[next(iter(self))]
+        super().__setitem__(key, value)
+
+
+@dataclass(frozen=True)
+class Line:
+    """One vibration line of one surface: the dotted names of its frequency, amplitude and phase
+    (indexed, "name[i]", when the scene gives a list)."""
+
+    surface: str
+    frequency: str
+    amplitude: str
+    phase: str
+    label: str
+
+    def names(self) -> tuple[str, str, str]:
+        return self.frequency, self.amplitude, self.phase
+
+
+def is_number(v: Any) -> bool:
+    if isinstance(v, bool):
+        return False
+    if isinstance(v, (int, float)):
+        return True
+    if isinstance(v, str):
+        try:
+            expression(v, "")
+            return True
+        except SceneError:
+            return False
+    return False
+
+
+def numeric_keys(table: dict, prefix: str = "") -> Iterator[str]:
+    """Every dotted name of a number in `table` (a list of numbers gives "name" and "name[i]")."""
+    for k, v in table.items():
+        name = prefix + k
+        if isinstance(v, dict):
+            yield from numeric_keys(v, name + ".")
+        elif isinstance(v, list) and v and all(is_number(e) for e in v):
+            yield name
+            yield from (f"{name}[{i}]" for i in range(len(v)))
+        elif is_number(v):
+            yield name
+
+
+def with_sampling(table: dict, series: Series) -> dict:
+    """The scene table sampled as the data are (its [sampling] only serves the scene's checks)."""
+    out = copy.deepcopy(table)
+    out["sampling"] = {"fs": series.fs, "duration": float(series.time[-1] - series.time[0]) + series.dt,
+                       "start": float(series.time[0])}
+    return out
+
+
+class ResponseLikelihood:
+    """log p(data | parameters) for a scene whose motions are deterministic (plate, Rayleigh)."""
+
+    kind = "response"
+
+    def __init__(self, table: dict, series: Series):
+        self.series = series
+        self.t = series.time
+        self.base = with_sampling(table, series)
+        self.scene = scene_from_table(self.base)
+        self._good = np.isfinite(series.intensity)
+        self._ref = float(np.mean(series.intensity[self._good]))
+        self._y_ref = series.intensity[self._good] - self._ref
+        if not any(isinstance(s.motion, ModalMotion) for s in self.scene.surfaces):
+            raise SceneError("fit: the scene has no vibrating surface (a plate, rayleigh or frame motion)")
+        self._cache = _Bounded()
+        for s in self.scene.surfaces:  # an absent phase is 0: write it, so that it can be set
+            m = (self.base["surfaces"][s.name].get("motion") or {})
+            if isinstance(s.motion, ModalMotion) and "frequency" in m and "phase" not in m:
+                m["phase"] = [0.0] * len(m["frequency"]) if isinstance(m["frequency"], list) else 0.0
+        self._layout0 = footprint_layout(self.scene, self._cache)
+        self._kinds = {n: self._classify(n) for n in self.fittable()}
+        self._fixed: dict[str, float] = {}
+        self.model, self.model_error = self._choose_model()
+
+    # ------------------------------------------------------------------ names
+    def fittable(self) -> set[str]:
+        """Every number of the scene but sampling, resolution and the noise model's constants; each
+        line's frequency, amplitude and phase (a phase the scene leaves out is 0); noise.sigma."""
+        names = {n for n in numeric_keys(self.base) if not n.startswith(_NOT_FITTABLE)} | {"noise.sigma", "sun.irradiance"}
+        for line in self.lines():
+            for n in line.names():
+                names |= {n, n[:-3]} if n.endswith("[0]") else {n}
+        return names
+
+    def _classify(self, name: str) -> str:
+        if name == "noise.sigma":
+            return "noise"
+        if name == "sun.irradiance":
+            return "gain"
+        parts = name.split(".")
+        if len(parts) >= 4 and parts[0] == "surfaces" and parts[2] == "motion":
+            return "motion"
+        return "scene"
+
+    def lines(self) -> list[Line]:
+        """Every vibration line of every moving surface, in scene order."""
+        out = []
+        for s in self.scene.surfaces:
+            m = (self.base["surfaces"][s.name].get("motion") or {})
+            if not isinstance(s.motion, ModalMotion):
+                continue
+            k = f"surfaces.{s.name}.motion."
+            amp = next((a for a in _AMPLITUDE_KEYS if a in m), None)
+            if amp is None:
+                continue
+            if isinstance(m.get("frequency"), list):
+                n = len(m["frequency"])
+                for i in range(n):
+                    label = s.name if n == 1 else f"{s.name}[{i}]"
+                    out.append(Line(s.name, f"{k}frequency[{i}]", f"{k}{amp}[{i}]", f"{k}phase[{i}]", label))
+            else:
+                out.append(Line(s.name, k + "frequency", k + amp, k + "phase", s.name))
+        return out
+
+    def base_value(self, name: str) -> float:
+        if name not in self._fixed:
+            try:
+                self._fixed[name] = get_value(self.base, name)
+            except SceneError:
+                if name == "sun.irradiance":
+                    return self.scene.sun.irradiance
+                raise
+        return self._fixed[name]
+
+    # ------------------------------------------------------------------ model
+    def _choose_model(self) -> tuple[str, float]:
+        """Taylor (fast, re-formed per motion) when its error bound is well below the noise;
+        otherwise the compiler's own choice per evaluation (Chebyshev or dense)."""
+        bound = compile_scene(self.scene, self.t, force="taylor2", shape_cache=self._cache).error_bound()
+        sd = self.noise_scale()
+        return ("taylor2" if bound <= TAYLOR_TOLERANCE * sd else "compiled"), float(bound)
+
+    def taylor_error(self, values: dict[str, float]) -> float:
+        """The Taylor model's error bound at `values` (`forward.reduce`: cubic and quartic terms)."""
+        return float(compile_scene(scene_from_table(self._table(values)), self.t, force="taylor2",
+                                   shape_cache=self._cache).error_bound())
+
+    def _table(self, values: dict[str, float]) -> dict:
+        """The scene table with `values` set (noise.sigma is the likelihood's, not the scene's)."""
+        table = copy.deepcopy(self.base)
+        for n, v in values.items():
+            if self._kinds.get(n) in ("scene", "motion", "gain"):
+                set_value(table, n, v)
+        return table
+
+    def use_compiled(self) -> None:
+        """Evaluate the mean with the compiler's own choice (Chebyshev or dense) from now on."""
+        self.model = "compiled"
+
+    def noise_scale(self) -> float:
+        """The sensor noise sd: the scene's sigma, else a robust estimate from the data's
+        sample-to-sample differences (a smooth signal cancels in them)."""
+        sigma = float(self.scene.noise.sigma)
+        if sigma > 0:
+            return sigma
+        d = np.diff(self.series.intensity)
+        d = d[np.isfinite(d)]
+        return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2)) if d.size else 0.0
+
+    def mean(self, values: dict[str, float]) -> np.ndarray:
+        """x(t) at the given parameter values (others from the scene)."""
+        level, ac = self.parts(values)
+        return level + ac
+
+    def parts(self, values: dict[str, float]) -> tuple[float, np.ndarray]:
+        """(x at rest, x(t) - x at rest) at the given values: the AC part formed directly (Taylor),
+        so that a signal ~1e-12 of the mean level keeps its digits in the likelihood."""
+        scene_keys = {n: v for n, v in values.items() if self._kinds.get(n) == "scene"}
+        if scene_keys or self.model == "compiled":
+            scene = scene_from_table(self._table(values))
+            if self.model == "compiled":
+                return compile_scene(scene, self.t, DEFAULT_RTOL, shape_cache=self._cache).parts()
+            return self._taylor(footprint_layout(scene, self._cache), [s.motion for s in scene.surfaces],
+                                scene.sun.irradiance)
+        motions = [s.motion for s in self.scene.surfaces]
+        touched = {n.split(".")[1] for n in values if self._kinds.get(n) == "motion"}
+        for k, s in enumerate(self.scene.surfaces):
+            if s.name in touched:
+                motions[k] = self._motion(s, values)
+        return self._taylor(self._layout0, motions, values.get("sun.irradiance", self.scene.sun.irradiance))
+
+    def _taylor(self, layout: Any, motions: list, irradiance: float) -> tuple[float, np.ndarray]:
+        ac = np.zeros(self.t.size)
+        for k, x, y, weight, derivs in layout.moving:
+            ac += weight * taylor_surface_ac(motions[k], x, y, derivs, self.t, self._cache)
+        return irradiance * layout.rest, irradiance * ac
+
+    def _motion(self, surface: Any, values: dict[str, float]) -> ModalMotion:
+        """The surface's motion rebuilt from its scene table with the given values set."""
+        prefix = f"surfaces.{surface.name}.motion."
+        sub = dict(self.base["surfaces"][surface.name]["motion"])
+        for n, v in values.items():
+            if n.startswith(prefix):
+                set_value(sub, n[len(prefix):], v)
+        table = Table(sub, prefix[:-1])
+        return MOTION_KINDS[table.choice("kind", None, tuple(MOTION_KINDS))](table, surface.x, surface.y)
+
+    def variance(self, mean: np.ndarray, values: dict[str, float]) -> np.ndarray | float:
+        """Per-sample noise variance: sigma^2, shot noise at the mean, ADC step^2 / 12."""
+        noise = self.scene.noise
+        sigma = values.get("noise.sigma", noise.sigma)
+        var: np.ndarray | float = sigma * sigma
+        if noise.photons_per_unit > 0:
+            var = var + np.clip(mean, 0.0, None) / noise.photons_per_unit
+        if noise.adc_bits > 0:
+            full = noise.adc_full_scale if noise.adc_full_scale > 0 else 2.0 * float(np.max(mean))
+            var = var + (full / (2**noise.adc_bits - 1)) ** 2 / 12.0
+        return var
+
+    def log_likelihood(self, values: dict[str, float]) -> float:
+        try:
+            level, ac = self.parts(values)
+        except SceneError:  # a value outside what the scene allows
+            return -math.inf
+        # residuals about the data's mean level: y - x = (y - ref) - ((level - ref) + ac), so that
+        # no sample's residual is a difference of two numbers at the mean level
+        r = self._y_ref - ((level - self._ref) + ac[self._good])
+        var = self.variance(level + ac, values)
+        if np.ndim(var):
+            var = var[self._good]
+        if not np.all(np.asarray(var) > 0):
+            return -math.inf
+        n = r.size
+        if np.ndim(var):
+            return float(-0.5 * (np.sum(r * r / var) + np.sum(np.log(var)) + n * math.log(2 * math.pi)))
+        return float(-0.5 * (np.dot(r, r) / var + n * math.log(2 * math.pi * var)))
