@@ -8,7 +8,6 @@ from forward.geometry import angle_between
 def directional_hemispherical_reflectance(m, theta_i, reflectance=0.7):
     """Integral of the lobe BRDF f = B / cos_i times cos_v over the outgoing hemisphere, by a
     tensor Gauss-Legendre rule in the facet frame, windowed around the mirror direction."""
-    sun = np.array([-np.sin(theta_i), 0.0, np.cos(theta_i)])
     n_r = np.array([np.sin(theta_i), 0.0, np.cos(theta_i)])
     w = min(14 * m, np.pi)
     t_lo, t_hi = max(0.0, theta_i - w), min(np.pi / 2, theta_i + w)
