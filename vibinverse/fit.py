@@ -42,7 +42,8 @@ def response_free(table: dict, series: Series, like=None) -> dict[str, Prior]:
     """What an analyst fits on a deterministic scene (plate, Rayleigh source) without an [infer]
     table: each line's frequency (the whole band for one line; between the neighbours' midpoints
     for several, so that lines cannot swap), amplitude (0 to 100x the scene's value), phase (a 2 pi
-    window centred on the spectral estimate, so that the posterior does not straddle the wrap), the
+    window centred on the spectral estimate, so that the posterior does not straddle the wrap; a pi
+    window for a line the footprint sees only at second order, where the phase is defined mod pi), the
     calibration gain sun.irradiance (within 2x of what the data's mean level implies) and the
     sensor noise sigma."""
     from vibinverse.estimators.response_spectral import response_guesses
@@ -78,9 +79,9 @@ def response_free(table: dict, series: Series, like=None) -> dict[str, Prior]:
     guesses = [{n: _inside(g.get(n, _prior_centre(free[n])), free[n]) for n in free}
                for g in response_guesses(series, like, bounds)]
     best = max(guesses, key=lambda g: _finite(problem.log_posterior(problem.space.to_z(g))))
-    for line in lines:
-        c = best[line.phase]
-        free[line.phase] = Prior("uniform", (c - np.pi, c + np.pi))
+    for line in lines:  # seen only at second order, the phase is defined modulo pi
+        c, half = best[line.phase], 0.5 * like.phase_period(line.phase)
+        free[line.phase] = Prior("uniform", (c - half, c + half))
     return free
 
 

@@ -63,10 +63,11 @@ class Problem:
                 out[n] = get_value(table, n)
             except Exception:
                 out[n] = 0.0 if _is_phase(n) else (_SCENE_DEFAULTS.get(n) if self.kind == "response" else None)
-            if out[n] is not None and _is_phase(n):  # the same angle inside the prior's 2 pi window
+            if out[n] is not None and _is_phase(n):  # the same angle inside the prior's window
                 lo, hi = p.bounds
+                period = self.like.phase_period(n) if self.kind == "response" else 2 * math.pi
                 if math.isfinite(lo) and not lo <= out[n] <= hi:
-                    out[n] = lo + (out[n] - lo) % (2 * math.pi)
+                    out[n] = lo + (out[n] - lo) % period
         return out
 
 

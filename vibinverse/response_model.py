@@ -166,6 +166,25 @@ class ResponseLikelihood:
                 out.append(Line(s.name, k + "frequency", k + amp, k + "phase", s.name))
         return out
 
+    def second_order_only(self, line: Line) -> bool:
+        """Whether the scene sees this line only at second order (a symmetric footprint: the first
+        order cancels). Then x ~ a^2 cos^2(w t + phase): the sign of the amplitude and the phase
+        modulo pi are all the data can tell."""
+        from vibinverse.estimators.response_spectral import harmonics
+
+        f = self.base_value(line.frequency)
+        others = {ln.amplitude: 0.0 for ln in self.lines() if ln != line}
+        first, second = harmonics(self.t, self.parts(others)[1], f, 0.5 * self.series.fs)
+        return second[0] > 10.0 * first[0]
+
+    def phase_period(self, name: str) -> float:
+        """The period of a line's phase as the data see it: pi for a line seen only at second
+        order, else 2 pi (for any name that is not a line's phase)."""
+        for line in self.lines():
+            if name in (line.phase, line.phase[:-3] if line.phase.endswith("[0]") else line.phase):
+                return math.pi if self.second_order_only(line) else 2 * math.pi
+        return 2 * math.pi
+
     def base_value(self, name: str) -> float:
         if name not in self._fixed:
             try:

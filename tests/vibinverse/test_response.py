@@ -205,3 +205,20 @@ def test_default_priors_partition_the_band_between_lines_and_centre_the_phase():
     for i, phase in enumerate((0.0, 3.0)):  # each window is 2 pi wide, centred within 0.5 rad of the true angle
         lo, hi = free[f"{G}phase[{i}]"].bounds
         assert hi - lo == pytest.approx(2 * np.pi) and abs(np.angle(np.exp(1j * (phase - 0.5 * (lo + hi))))) < 0.5
+
+
+def test_a_line_seen_only_at_second_order_gets_a_pi_phase_window_and_is_fitted(tmp_path):
+    """Centred footprint: x ~ a^2 cos^2(w t + phase), so phase and phase + pi are one fit. The
+    default prior is a pi window; the posterior is then one mode and holds the truth."""
+    table, series = simulate("roof_elastic", LOW_RES, "footprint.x=[-25.0, 25.0]", "footprint.y=[-25.0, 25.0]",
+                             "noise.sigma=2e-4", "surfaces.roof.motion.phase=2.0", seed=11)
+    free = free_defaults(table, series)
+    lo, hi = free[R + "phase"].bounds
+    assert hi - lo == pytest.approx(np.pi)
+    problem = Problem(table, series, free)
+    summary, _ = run_fit(problem, "mcmc", backend=tmp_path / "c.h5", max_steps=3000, progress=False)
+    assert not summary["diagnostics"]["multimodal"]
+    assert summary["parameters"][R + "phase"]["truth"] == pytest.approx(lo + (2.0 - lo) % np.pi)  # modulo pi
+    for n in (R + "frequency", R + "center_deflection", R + "phase"):
+        p = summary["parameters"][n]
+        assert p["q05"] <= p["truth"] <= p["q95"], (n, p)

@@ -76,8 +76,8 @@ def _line_guess(series: Series, like: ResponseLikelihood, line: Line, bounds: di
     others = {ln.amplitude: 0.0 for ln in like.lines() if ln != line}
     probe = like.mean({**_as_free(guess, like, free, keep_all=True), **others,
                        line.frequency: f, line.amplitude: a_ref, line.phase: 0.0})
-    first, second = sinusoid(t, probe, f)[:2], sinusoid(t, probe, 2 * f)[:2] if 2 * f < nyq else (0.0, 0.0)
-    data1, data2 = sinusoid(t, y, f)[:2], sinusoid(t, y, 2 * f)[:2] if 2 * f < nyq else (0.0, 0.0)
+    first, second = harmonics(t, probe, f, nyq)
+    data1, data2 = harmonics(t, y, f, nyq)
     if first[0] >= second[0] or second[0] == 0.0:  # first order: x ~ a
         amp = a_ref * data1[0] / max(first[0], 1e-300)
         phase = data1[1] - first[1]
@@ -91,6 +91,11 @@ def _line_guess(series: Series, like: ResponseLikelihood, line: Line, bounds: di
         lo, hi = bounds[pname]
         centre = 0.5 * (lo + hi)
         guess[line.phase] = float(centre + np.angle(np.exp(1j * (guess[line.phase] - centre))))
+
+
+def harmonics(t: np.ndarray, y: np.ndarray, f: float, nyq: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(amplitude, phase) of y's sinusoids at f and 2f (2f at or above Nyquist: (0, 0))."""
+    return sinusoid(t, y, f)[:2], (sinusoid(t, y, 2 * f)[:2] if 2 * f < nyq else (0.0, 0.0))
 
 
 def _as_free(guess: dict[str, float], like: ResponseLikelihood, free: set[str], keep_all: bool = False
