@@ -25,6 +25,7 @@ from forward.reduce import rigid_observation
 from forward.scene_file import scene_from_table
 from vibinverse.data import Series
 from vibinverse.kalman import log_likelihood, njit
+from vibinverse.scene_keys import get_value, numeric_keys, set_value
 
 TILT_MODES = (3, 4)  # generalized coordinates rx, ry
 
@@ -57,57 +58,6 @@ def modal_table(table: dict) -> dict:
         motion["tilt_frequency"], motion["tilt_damping_ratio"] = map(float, modal["tilt"])
         motion["lateral_frequency"], motion["lateral_damping_ratio"] = map(float, modal["lateral"])
     return out
-
-
-def get_value(table: dict, key: str) -> float:
-    """The numeric value at dotted `key` ("...drive_frequency" is the first line, "[i]" picks one)."""
-    node: Any = table
-    parts = key.split(".")
-    for part in parts:
-        base, idx = _split_index(part)
-        if not isinstance(node, dict) or base not in node:
-            raise SceneError(f"{key}: no such scene value")
-        node = node[base]
-        if isinstance(node, list):
-            node = node[idx if idx is not None else 0]
-    if isinstance(node, str):
-        from forward.validation import expression
-        return expression(node, key)
-    if isinstance(node, bool) or not isinstance(node, (int, float)):
-        raise SceneError(f"{key}: not a number")
-    return float(node)
-
-
-def set_value(table: dict, key: str, value: Any) -> None:
-    """Set dotted `key` in `table`; SceneError names the key. As in `get_value`, "a.b[i]" is
-    element i of a list and a plain "a.b" on a list is its first element."""
-    node: Any = table
-    parts = key.split(".")
-    for part in parts[:-1]:
-        node = node.setdefault(_split_index(part)[0], {})
-        if not isinstance(node, dict):
-            raise SceneError(f"{key}: {part} is a value, not a table")
-    try:
-        base, idx = _split_index(parts[-1])
-    except ValueError:
-        raise SceneError(f"{key}: the index is not an integer") from None
-    current = node.get(base)
-    if idx is None and not isinstance(current, list):
-        node[base] = value
-        return
-    idx = idx or 0
-    items = list(current) if isinstance(current, list) else ([current] if current is not None else [])
-    if not 0 <= idx < len(items):
-        raise SceneError(f"{key}: index {idx} is outside the list of {len(items)} values")
-    items[idx] = value
-    node[base] = items
-
-
-def _split_index(part: str) -> tuple[str, int | None]:
-    if part.endswith("]") and "[" in part:
-        base, idx = part[:-1].split("[", 1)
-        return base, int(idx)
-    return part, None
 
 
 @dataclass
@@ -203,8 +153,6 @@ class FrameLikelihood:
         """Scene values the observation depends on and the frame's dynamics do not: sun, view,
         optics, footprint, the other surfaces, the gain sun.irradiance. (The roof's own extents set
         its inertia and are not among them.)"""
-        from vibinverse.response_model import numeric_keys
-
         skip = ("sampling.", "infer.", "title", "noise.", "footprint.resolution", f"surfaces.{self.roof}.motion.",
                 f"surfaces.{self.roof}.x", f"surfaces.{self.roof}.y")
         return {n for n in numeric_keys(self.base) if not n.startswith(skip)} | {"sun.irradiance"}

@@ -8,7 +8,8 @@ import numpy as np
 
 from forward.errors import SceneError
 from vibinverse.data import Series
-from vibinverse.frame_model import FrameLikelihood, get_value, is_frame
+from vibinverse.frame_model import FrameLikelihood, is_frame
+from vibinverse.scene_keys import get_value
 from vibinverse.params import ParameterSpace, Prior
 from vibinverse.response_model import ResponseLikelihood
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -27,9 +27,10 @@ from forward.motion import MOTION_KINDS
 from forward.motion.base import ModalMotion
 from forward.reduce import DEFAULT_RTOL, compile_scene, footprint_layout, taylor_surface_ac
 from forward.scene_file import scene_from_table
-from forward.validation import Table, expression
+from forward.validation import Table
 from vibinverse.data import Series
-from vibinverse.frame_model import get_value, set_value
+from vibinverse.estimators.spectral import harmonics
+from vibinverse.scene_keys import get_value, numeric_keys, set_value
 
 # values a fit cannot meaningfully free: they shape the computation, not the world
 _NOT_FITTABLE = ("sampling.", "infer.", "title", "footprint.resolution", "noise.")
@@ -60,37 +61,9 @@ class Line:
     frequency: str
     amplitude: str
     phase: str
-    label: str
 
     def names(self) -> tuple[str, str, str]:
         return self.frequency, self.amplitude, self.phase
-
-
-def is_number(v: Any) -> bool:
-    if isinstance(v, bool):
-        return False
-    if isinstance(v, (int, float)):
-        return True
-    if isinstance(v, str):
-        try:
-            expression(v, "")
-            return True
-        except SceneError:
-            return False
-    return False
-
-
-def numeric_keys(table: dict, prefix: str = "") -> Iterator[str]:
-    """Every dotted name of a number in `table` (a list of numbers gives "name" and "name[i]")."""
-    for k, v in table.items():
-        name = prefix + k
-        if isinstance(v, dict):
-            yield from numeric_keys(v, name + ".")
-        elif isinstance(v, list) and v and all(is_number(e) for e in v):
-            yield name
-            yield from (f"{name}[{i}]" for i in range(len(v)))
-        elif is_number(v):
-            yield name
 
 
 def with_sampling(table: dict, series: Series) -> dict:
@@ -159,19 +132,15 @@ class ResponseLikelihood:
                 continue
             if isinstance(m.get("frequency"), list):
                 n = len(m["frequency"])
-                for i in range(n):
-                    label = s.name if n == 1 else f"{s.name}[{i}]"
-                    out.append(Line(s.name, f"{k}frequency[{i}]", f"{k}{amp}[{i}]", f"{k}phase[{i}]", label))
+                out += [Line(s.name, f"{k}frequency[{i}]", f"{k}{amp}[{i}]", f"{k}phase[{i}]") for i in range(n)]
             else:
-                out.append(Line(s.name, k + "frequency", k + amp, k + "phase", s.name))
+                out.append(Line(s.name, k + "frequency", k + amp, k + "phase"))
         return out
 
     def second_order_only(self, line: Line) -> bool:
         """Whether the scene sees this line only at second order (a symmetric footprint: the first
         order cancels). Then x ~ a^2 cos^2(w t + phase): the sign of the amplitude and the phase
         modulo pi are all the data can tell."""
-        from vibinverse.estimators.response_spectral import harmonics
-
         f = self.base_value(line.frequency)
         others = {ln.amplitude: 0.0 for ln in self.lines() if ln != line}
         first, second = harmonics(self.t, self.parts(others)[1], f, 0.5 * self.series.fs)

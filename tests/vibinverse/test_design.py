@@ -268,7 +268,7 @@ def test_design_needs_noise():
 
 
 def test_dotted_keys_set_list_elements_like_get_value_reads_them():
-    from vibinverse.frame_model import get_value, set_value
+    from vibinverse.scene_keys import get_value, set_value
 
     t = {"m": {"f": [1.0, 2.0], "x": 3.0}}
     set_value(t, "m.f[1]", 5.0)

@@ -13,7 +13,8 @@ from vibinverse.data import Series
 from vibinverse.estimators.sindy import SindyFailed, sindy_best
 from vibinverse.estimators.spectral import frame_guesses
 from vibinverse.fit import default_free, run_fit
-from vibinverse.frame_model import FrameLikelihood, modal_table, set_value
+from vibinverse.frame_model import FrameLikelihood, modal_table
+from vibinverse.scene_keys import set_value
 from vibinverse.problem import Problem
 
 K = "surfaces.roof.motion."

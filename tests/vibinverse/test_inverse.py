@@ -359,7 +359,8 @@ def test_frame_geometry_is_fittable_through_the_observation():
     observation fixed, hands over to the scipy MAP)."""
     import copy
 
-    from vibinverse.frame_model import FrameLikelihood, set_value
+    from vibinverse.frame_model import FrameLikelihood
+    from vibinverse.scene_keys import set_value
     from vibinverse.params import Prior
 
     problem = frame_problem(SNR10, "footprint.resolution=32")

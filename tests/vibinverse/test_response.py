@@ -17,7 +17,7 @@ from tests.conftest import SCENES
 from vibinverse.data import validate
 from vibinverse.design.metrics import evaluate
 from vibinverse.fit import free_defaults, run_fit
-from vibinverse.frame_model import set_value
+from vibinverse.scene_keys import set_value
 from vibinverse.params import Prior
 from vibinverse.problem import Problem
 from vibinverse.response_model import ResponseLikelihood

@@ -85,7 +85,7 @@ def response_fit_row(scene_path: Path, log=print) -> dict:
     from forward.render import pixel_signal
     from forward.scene_file import scene_from_table
     from vibinverse.fit import free_defaults
-    from vibinverse.frame_model import set_value
+    from vibinverse.scene_keys import set_value
 
     scene, table = load_scene(scene_path, [])
     o = observe(scene, seed=1)

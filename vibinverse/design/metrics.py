@@ -30,7 +30,8 @@ from forward.scene_file import scene_from_table
 from vibinverse.data import Series
 from vibinverse.fisher import crlb_from_fisher, frame_fisher, spectrum_at
 from vibinverse.estimators.spectral import sinusoid
-from vibinverse.frame_model import FrameLikelihood, frame_surface, get_value, is_frame, modal_table, set_value
+from vibinverse.frame_model import FrameLikelihood, frame_surface, is_frame, modal_table
+from vibinverse.scene_keys import get_value, set_value
 
 # Design evaluates every configuration with the second-order (Taylor) reduced model: one model
 # for a configuration and its perturbations, so that derivatives are smooth, at ~ms per scene.

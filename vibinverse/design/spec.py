@@ -21,7 +21,7 @@ import numpy as np
 
 from forward.errors import SceneError
 from forward.validation import expression
-from vibinverse.frame_model import set_value
+from vibinverse.scene_keys import set_value
 
 DESIGN_KEYS = ("sensor.offset", "footprint.center", "footprint.center_x", "footprint.center_y", "footprint.width")
 CATEGORICAL = ("sensor.polarizer", "sensor.radiometry", ".material")  # keys (or key endings) taking words

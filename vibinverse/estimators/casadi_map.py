@@ -19,7 +19,8 @@ import casadi as ca
 import numpy as np
 
 from forward.motion.frame import FrameParameters, linearize
-from vibinverse.frame_model import get_value, stationary_2x2_entries
+from vibinverse.frame_model import stationary_2x2_entries
+from vibinverse.scene_keys import get_value
 from vibinverse.params import Prior
 from vibinverse.problem import Problem
 

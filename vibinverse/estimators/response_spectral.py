@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from vibinverse.data import Series
-from vibinverse.estimators.spectral import line_candidates, sinusoid
+from vibinverse.estimators.spectral import harmonics, line_candidates
 from vibinverse.response_model import Line, ResponseLikelihood
 
 
@@ -91,11 +91,6 @@ def _line_guess(series: Series, like: ResponseLikelihood, line: Line, bounds: di
         lo, hi = bounds[pname]
         centre = 0.5 * (lo + hi)
         guess[line.phase] = float(centre + np.angle(np.exp(1j * (guess[line.phase] - centre))))
-
-
-def harmonics(t: np.ndarray, y: np.ndarray, f: float, nyq: float) -> tuple[tuple[float, float], tuple[float, float]]:
-    """(amplitude, phase) of y's sinusoids at f and 2f (2f at or above Nyquist: (0, 0))."""
-    return sinusoid(t, y, f)[:2], (sinusoid(t, y, 2 * f)[:2] if 2 * f < nyq else (0.0, 0.0))
 
 
 def _as_free(guess: dict[str, float], like: ResponseLikelihood, free: set[str], keep_all: bool = False

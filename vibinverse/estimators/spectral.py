@@ -38,6 +38,11 @@ def sinusoid(t: np.ndarray, y: np.ndarray, f: float) -> tuple[float, float, np.n
     return float(np.hypot(coef[0], coef[1])), float(np.arctan2(-coef[1], coef[0])), basis @ coef
 
 
+def harmonics(t: np.ndarray, y: np.ndarray, f: float, nyq: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(amplitude, phase) of y's sinusoids at f and 2f (2f at or above Nyquist: (0, 0))."""
+    return sinusoid(t, y, f)[:2], (sinusoid(t, y, 2 * f)[:2] if 2 * f < nyq else (0.0, 0.0))
+
+
 def _refine(freqs: np.ndarray, power: np.ndarray, i: int) -> float:
     if 0 < i < len(freqs) - 1:
         a, b, c = np.log(power[i - 1:i + 2] + 1e-300)
