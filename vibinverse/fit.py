@@ -56,6 +56,10 @@ def response_free(table: dict, series: Series, like=None) -> dict[str, Prior]:
     nyq = 0.5 * series.fs
     lo = max(3.0 / (series.time[-1] - series.time[0]), 1e-6)
     f0 = sorted(like.base_value(ln.frequency) for ln in lines)
+    same = [a for a, b in zip(f0, f0[1:]) if a == b]
+    if same:
+        raise SceneError(f"fit: two lines share the frequency {same[0]:g} Hz in the scene, so default priors cannot keep "
+                         "them apart; give their frequencies priors in [infer.free] or --free")
     edges = [lo, *((a + b) / 2 for a, b in zip(f0, f0[1:])), nyq]
     free: dict[str, Prior] = {}
     for line in lines:

@@ -80,6 +80,10 @@ class FrameLikelihood:
             raise SceneError("fit: the state-space likelihood needs uniformly sampled times (gaps as NaN are fine)")
         self.base = modal_table(table)
         self.roof = frame_surface(self.base)
+        others = [n for n, s in self.base["surfaces"].items() if n != self.roof and (s.get("motion") or {})]
+        if others:
+            raise SceneError(f"fit: surfaces.{others[0]}.motion: a frame scene's likelihood holds every other surface at "
+                             "rest; remove that motion (or fit it in a scene without the frame)")
         self.series = series
         self.t = series.time
         self.dt = series.dt

@@ -180,6 +180,19 @@ def test_zero_noise_that_is_not_free_is_a_clear_error():
         Problem(table, series, {R + "frequency": Prior("uniform", (30.0, 50.0))})
 
 
+def test_scenes_the_fit_cannot_take_are_clear_errors():
+    table, series = simulate("ground_rayleigh", LOW_RES, "surfaces.ground.motion.frequency=[40.0, 40.0]",
+                             "surfaces.ground.motion.amplitude=[1e-3, 5e-4]")
+    with pytest.raises(SceneError, match="share the frequency 40 Hz"):
+        free_defaults(table, series)
+    _, frame = load_scene(SCENES / "roof_frame.toml", [])
+    frame["surfaces"]["wall"] = {"x": [30.0, 40.0], "y": [30.0, 40.0], "material": "ground",
+                                 "motion": {"kind": "plate", "frequency": 40.0, "center_deflection": 1e-3}}
+    t = np.arange(800) * 0.005
+    with pytest.raises(SceneError, match="surfaces.wall.motion"):
+        Problem(frame, validate(t, np.ones(t.size), "x"), {"noise.sigma": Prior("loguniform", (0.1, 1.0))})
+
+
 def test_cli_fits_a_plate_and_refuses_sindy(tmp_path):
     scene = SCENES / "roof_elastic.toml"
     data = tmp_path / "plate.csv"
