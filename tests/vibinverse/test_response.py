@@ -116,6 +116,20 @@ def test_ground_wave_mcmc_intervals_contain_the_truth(tmp_path):
     assert summary["diagnostics"]["converged"]
 
 
+def test_data_in_other_units_are_absorbed_by_the_gain():
+    """A sensor in digital numbers: the same series x 1000. The default gain prior follows the
+    mean level, sun.irradiance comes out 1000x, and the amplitude is unchanged."""
+    table, series = simulate("roof_elastic", LOW_RES, seed=12)
+    _, ref = fitted(table, series)
+    scaled = validate(series.time, 1000.0 * series.intensity, "dn", series.scene)
+    table_dn = json.loads(json.dumps(table))
+    table_dn["noise"]["sigma"] = 1000.0 * table["noise"]["sigma"]
+    _, dn = fitted(table_dn, scaled)
+    assert dn["parameters"]["sun.irradiance"]["median"] == pytest.approx(1000.0, rel=1e-3)
+    a, b = (s["parameters"][R + "center_deflection"] for s in (ref, dn))
+    assert b["median"] == pytest.approx(a["median"], abs=0.05 * a["sd"]) and b["sd"] == pytest.approx(a["sd"], rel=0.02)
+
+
 def test_a_vibration_absent_from_the_data_is_not_detected():
     table, series = simulate("roof_elastic", truth_overrides=("surfaces.roof.motion.center_deflection=0",), seed=5)
     _, summary = fitted(table, series)
