@@ -241,16 +241,17 @@ def _map(problem: Problem, starts: list[dict], method: str, seed: int) -> tuple[
     """MAP from every candidate start (each candidate line as the drive; the posterior decides).
     casadi + IPOPT with exact derivatives, except for method "map" (derivative-free scipy), which is
     also the fallback should IPOPT fail."""
-    if method != "map" and problem.kind != "frame":
-        print("the casadi MAP covers frame scenes; this deterministic scene uses the scipy MAP", flush=True)
-    elif method != "map" and problem.like.geometry_free(problem.space.names):
+    if method != "map" and problem.kind == "frame" and problem.like.geometry_free(problem.space.names):
         print(f"the casadi MAP holds the observation fixed; {', '.join(problem.like.geometry_free(problem.space.names))} "
               "re-form it, so the scipy MAP is used", flush=True)
     elif method != "map":
         try:
             from vibinverse.estimators.casadi_map import casadi_map
+            from vibinverse.estimators.casadi_response import Unsupported
 
             return casadi_map(problem, starts), "casadi"
+        except Unsupported as exc:
+            print(f"the casadi MAP does not cover this fit ({exc}); using the scipy MAP", flush=True)
         except Exception as exc:  # noqa: BLE001 - any solver failure falls back, and says so
             print(f"casadi MAP failed ({str(exc).splitlines()[0][:120]}); using the derivative-free MAP", flush=True)
     with warnings.catch_warnings():

@@ -249,3 +249,43 @@ def test_a_line_seen_only_at_second_order_gets_a_pi_phase_window_and_is_fitted(t
     for n in (R + "frequency", R + "center_deflection", R + "phase"):
         p = summary["parameters"][n]
         assert p["q05"] <= p["truth"] <= p["q95"], (n, p)
+
+
+# ------------------------------------------------------------------ casadi MAP
+
+def test_casadi_objective_equals_the_numpy_posterior_with_gaps_and_shot_noise():
+    from vibinverse.estimators.casadi_response import CasadiResponseObjective
+
+    table, series = simulate("roof_elastic", LOW_RES, "noise.photons_per_unit=1e4", seed=3, gaps=0.05)
+    problem = Problem(table, series, free_defaults(table, series))
+    objective = CasadiResponseObjective(problem)
+    z0 = problem.space.to_z(problem.truth())
+    for dz in np.random.default_rng(0).normal(0.0, 0.01, (3, z0.size)):
+        assert objective(z0 + dz) == pytest.approx(-problem.log_posterior(z0 + dz), rel=1e-9)
+
+
+def test_casadi_map_equals_the_scipy_map_and_falls_back_where_shapes_move():
+    from vibinverse.estimators.casadi_response import CasadiResponseObjective, Unsupported
+
+    table, series = simulate("roof_elastic", LOW_RES, seed=3)
+    problem = Problem(table, series, free_defaults(table, series))
+    fast, _ = run_fit(problem, "casadi", progress=False)
+    slow, _ = run_fit(problem, "map", progress=False)
+    assert fast["method"] == "casadi" and slow["method"] == "map"
+    for n, p in slow["parameters"].items():
+        assert fast["parameters"][n]["median"] == pytest.approx(p["median"], abs=0.01 * p["sd"])
+        assert fast["parameters"][n]["sd"] == pytest.approx(p["sd"], rel=0.01)
+    # a Rayleigh frequency changes the wave's shape; a plate driven through its boundary has q ~ w^2
+    ground, gs = simulate("ground_rayleigh", LOW_RES, "noise.sigma=3e-6")
+    with pytest.raises(Unsupported, match="frequency"):
+        CasadiResponseObjective(Problem(ground, gs, free_defaults(ground, gs)))
+    fixed_f = {G + "amplitude[0]": Prior("uniform", (0.0, 0.01)), G + "phase[0]": Prior("uniform", (-np.pi, np.pi)),
+               "noise.sigma": Prior("loguniform", (1e-7, 1e-4))}
+    assert run_fit(Problem(ground, gs, fixed_f), "casadi", progress=False)[0]["method"] == "casadi"
+    boundary = json.loads(json.dumps(table))
+    motion = boundary["surfaces"]["roof"]["motion"]
+    del motion["center_deflection"]
+    motion.update({"boundary_amplitude": 1e-4, "density": 7850.0, "shear_modulus": 8e10})
+    with pytest.raises(Unsupported, match="frequency"):
+        CasadiResponseObjective(Problem(boundary, series, {R + "frequency": Prior("uniform", (30.0, 50.0)),
+                                                           "noise.sigma": Prior("loguniform", (1e-3, 1.0))}))

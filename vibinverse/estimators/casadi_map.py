@@ -197,9 +197,14 @@ def _compiled(problem: Problem):
     sampling; built once and reused for every series of the same design (a bench, a study)."""
     like = problem.like
     key = (json.dumps(like.base, sort_keys=True, default=str), tuple(problem.space.names),
-           tuple(str(p) for p in problem.space.priors), hash(like.t.tobytes()))
+           tuple(str(p) for p in problem.space.priors), hash(like.t.tobytes()), getattr(like, "model", "frame"))
     if key not in _CACHE:
-        obj = CasadiFrameObjective(problem)
+        if problem.kind == "frame":
+            obj = CasadiFrameObjective(problem)
+        else:
+            from vibinverse.estimators.casadi_response import CasadiResponseObjective
+
+            obj = CasadiResponseObjective(problem)  # Unsupported when the free values leave its form
         z = ca.MX.sym("z", len(problem.space))
         p = ca.MX.sym("p", 2 * like.t.size)
         f = obj.function(z, p[:like.t.size], p[like.t.size:])
