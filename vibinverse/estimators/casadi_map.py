@@ -1,5 +1,6 @@
-"""MAP of the frame posterior with casadi: exact derivatives, IPOPT, Laplace covariance from the exact
-Hessian.
+"""MAP with casadi: exact derivatives, IPOPT, Laplace covariance from the exact Hessian. The solver
+and the Laplace step serve both likelihoods; this module writes the frame posterior, and
+`casadi_response` the deterministic-scene one.
 
 The objective is the same posterior as `vibinverse.problem.Problem` (a test checks that they agree
 to 1e-9), written in casadi expressions:
