@@ -194,8 +194,10 @@ def cmd_bench(args: argparse.Namespace) -> None:
         from vibinverse.bench.estimators_bench import plot_speed_error, run as run_estimators
 
         sizes = {"n_seeds": 5, "n_coverage": 20, "mcmc_seeds": 4} if args.quick else {}
-        result = run_estimators(builtin_scene("roof_frame"), **sizes)
-        print(_estimator_table(result["rows"]))
+        result = run_estimators(builtin_scene(""), **sizes)
+        for scene in dict.fromkeys(r["scene"] for r in result["rows"]):
+            print(f"{scene}:")
+            print(_estimator_table([r for r in result["rows"] if r["scene"] == scene]))
         print(f"estimator comparison: {result['seconds']:.0f} s")
         rows = result["rows"]
     else:

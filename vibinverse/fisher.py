@@ -1,4 +1,5 @@
-"""Fisher information and Cramer-Rao bounds of the frame likelihood's parameters.
+"""Fisher information and Cramer-Rao bounds of the likelihoods' parameters (frame; deterministic
+scenes in `response_fisher`).
 
 For y ~ N(mu(theta), Sigma(theta)):  I_ij = d_i mu^T Sigma^-1 d_j mu + tr(Sigma^-1 d_i Sigma Sigma^-1 d_j Sigma) / 2.
 
@@ -20,6 +21,7 @@ from scipy.linalg import toeplitz
 
 from vibinverse.frame_model import Components, FrameLikelihood
 from vibinverse.kalman import whiten
+from vibinverse.response_model import ResponseLikelihood
 
 
 def _step(values: dict[str, float], name: str, rel_step: float) -> float:
@@ -146,3 +148,33 @@ def crlb_sd(like: FrameLikelihood, values: dict[str, float], names: list[str],
     information carried by the noise-driven resonances is counted too."""
     fisher = frame_fisher(like, values, names) if covariance else mean_fisher(like, values, names)
     return crlb_from_fisher(fisher, names)
+
+
+def response_fisher(like: ResponseLikelihood, values: dict[str, float], names: list[str],
+                    rel_step: float = 1e-6) -> np.ndarray:
+    """Fisher information of a deterministic scene's parameters (`ResponseLikelihood`): the mean
+    term D^T diag(1/var) D over the observed samples, with D = d mu / d theta differenced on the
+    AC part and the rest level separately (a 1e-12 signal keeps its digits), plus the variance
+    term of noise.sigma, sum_k 2 sigma^2 / var_k^2. The variance is held fixed in the mean term
+    (with shot noise it also depends on the mean; that information is left out, a lower bound)."""
+    good = np.isfinite(like.series.intensity)
+    level, ac = like.parts(values)
+    var = np.broadcast_to(like.variance(level + ac, values), ac.shape)[good]
+    rows = []
+    for n in names:
+        if n == "noise.sigma":
+            rows.append(None)
+            continue
+        h = rel_step * (abs(values[n]) if values[n] != 0 else 1.0)
+        (l_up, a_up), (l_dn, a_dn) = like.parts({**values, n: values[n] + h}), like.parts({**values, n: values[n] - h})
+        rows.append((((l_up - l_dn) + (a_up - a_dn)) / (2 * h))[good])
+    fisher = np.zeros((len(names), len(names)))
+    for i, di in enumerate(rows):
+        for j, dj in enumerate(rows):
+            if di is not None and dj is not None:
+                fisher[i, j] = np.sum(di * dj / var)
+    if "noise.sigma" in names:
+        i = names.index("noise.sigma")
+        sigma = values["noise.sigma"]
+        fisher[i, i] = float(np.sum(2 * sigma**2 / var**2))
+    return fisher

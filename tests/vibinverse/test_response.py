@@ -289,3 +289,20 @@ def test_casadi_map_equals_the_scipy_map_and_falls_back_where_shapes_move():
     with pytest.raises(Unsupported, match="frequency"):
         CasadiResponseObjective(Problem(boundary, series, {R + "frequency": Prior("uniform", (30.0, 50.0)),
                                                            "noise.sigma": Prior("loguniform", (1e-3, 1.0))}))
+
+
+def test_fisher_bound_equals_the_design_bound_and_the_sigma_bound():
+    """Two implementations of the same Cramer-Rao bound: `fisher.response_fisher` (nuisances gain
+    and phase) and `design.metrics` (nuisances DC and time shift) give the same frequency and
+    amplitude sds: a single line's phase is its time shift, and the mean level pins the gain (to
+    3e-5), so that it acts as a DC offset does. sigma's bound is sigma / sqrt(2N) exactly."""
+    from vibinverse.fisher import crlb_from_fisher, response_fisher
+
+    table, series = simulate("roof_elastic", seed=4)
+    problem = Problem(table, series, free_defaults(table, series))
+    names = problem.space.names
+    bound = crlb_from_fisher(response_fisher(problem.like, problem.truth(), names), names)
+    design = evaluate(table, [R + "frequency", R + "center_deflection"], {})
+    for n in (R + "frequency", R + "center_deflection"):
+        assert bound[n] == pytest.approx(design[f"crlb {n}"], rel=1e-3)
+    assert bound["noise.sigma"] == pytest.approx(0.05 / np.sqrt(2 * series.time.size), rel=1e-9)
