@@ -251,15 +251,16 @@ def build_parser() -> argparse.ArgumentParser:
     study.add_argument("-o", "--output", default="studies", help="output directory (default: studies)")
     study.set_defaults(func=cmd_study)
 
-    fit = sub.add_parser("fit", help="measured series + scene -> posterior of resonances, drive and noise")
+    fit = sub.add_parser("fit", help="measured series + scene -> posterior of resonances, drives, vibration "
+                         "lines and noise (a frame scene: Kalman likelihood; plate or ground: white noise)")
     fit.add_argument("data", help="series: CSV (time,intensity), .npy, .npz or netCDF; NaN = gap")
     fit.add_argument("--scene", required=True, help="scene file describing the observation (TOML)")
     fit.add_argument("--set", action="append", metavar="dotted.key=value", help="override a scene value")
     fit.add_argument("--free", action="append", metavar="NAME=PRIOR",
                      help="free parameter with prior, e.g. surfaces.roof.motion.tilt_frequency='uniform(2,5)'")
     fit.add_argument("--method", default="auto",
-                     help="spectral | sindy | casadi | map | mcmc | auto (default: spectral -> SINDy -> casadi -> "
-                          "emcee, each seeding the next); map is a derivative-free MAP (scipy)")
+                     help="spectral | sindy | casadi | map | mcmc | auto (default: spectral -> SINDy (frame scenes) "
+                          "-> casadi -> emcee, each seeding the next); map is a derivative-free MAP (scipy)")
     fit.add_argument("--seed", type=int, default=0)
     fit.add_argument("--workers", type=int, default=1, help="processes for the sampler")
     fit.add_argument("--max-steps", type=int, default=20000, help="cap on MCMC steps")
