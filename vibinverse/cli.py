@@ -214,7 +214,7 @@ def cmd_bench(args: argparse.Namespace) -> None:
 
 
 def _estimator_table(rows: list[dict]) -> str:
-    fmt = lambda v, f: "-" if v is None else format(v, f)
+    fmt = lambda v, f: format("-", f">{f.split('.')[0]}") if v is None else format(v, f)
     lines = [f"{'method':<9}{'SNR':>4} {'parameter':<20}{'bias':>11}{'rmse':>11}{'crlb_sd':>11}{'rmse/crlb':>10}"
              f"{'cover90':>8}{'time_s':>8}{'failed':>7}"]
     for r in rows:
