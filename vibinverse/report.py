@@ -55,12 +55,13 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
         if p["q05"] is None or not (np.isfinite(lo) and np.isfinite(hi)):
             continue
         log = str(p.get("prior", "")).startswith("loguniform")
-        f = np.log if log else (lambda v: v)
-        width = (f(max(p["q95"], 1e-300)) - f(max(p["q05"], 1e-300))) if log else p["q95"] - p["q05"]
+        f = (lambda v: np.log(max(v, 1e-300))) if log else (lambda v: v)  # the prior's own scale
+        width = f(p["q95"]) - f(p["q05"])
         if width > 0.5 * (f(hi) - f(lo)):
             out.append(f"{n} is not informed by the data: its 90 % interval covers more than half of the prior "
                        f"{p.get('prior')}.")
-        elif min(p["median"] - lo, hi - p["median"]) < 0.02 * (hi - lo):
+        elif min(f(p["median"]) - f(lo), f(hi) - f(p["median"])) < 0.5 * width:
+            # the median is nearer a bound than the interval's half-width: the posterior is cut there
             out.append(f"{n} sits at a bound of its prior {p.get('prior')}: widen the prior or check the model.")
     return out
 
