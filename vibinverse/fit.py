@@ -46,7 +46,7 @@ def response_free(table: dict, series: Series, like=None) -> dict[str, Prior]:
     window for a line the footprint sees only at second order, where the phase is defined mod pi), the
     calibration gain sun.irradiance (within 2x of what the data's mean level implies) and the
     sensor noise sigma."""
-    from vibinverse.estimators.response_spectral import response_guesses
+    from vibinverse.estimators.response_spectral import gain_from_level, response_guesses
     from vibinverse.response_model import ResponseLikelihood
 
     like = like or ResponseLikelihood(table, series)
@@ -72,11 +72,9 @@ def response_free(table: dict, series: Series, like=None) -> dict[str, Prior]:
         free[line.amplitude] = Prior("uniform", (0.0, 100.0 * a))
         free[line.phase] = Prior("uniform", (-np.pi, np.pi))
     scale = float(np.nanmax(np.abs(series.intensity)))
-    rest = float(np.mean(like.mean({ln.amplitude: 0.0 for ln in lines})))
-    if rest > 0:
-        gain = like.scene.sun.irradiance * float(np.nanmean(series.intensity)) / rest
-        if gain > 0:
-            free["sun.irradiance"] = Prior("loguniform", (gain / 2, gain * 2))
+    gain = gain_from_level(series, like)
+    if gain > 0:  # (NaN when the model or the data have no positive level: the gain stays fixed)
+        free["sun.irradiance"] = Prior("loguniform", (gain / 2, gain * 2))
     free["noise.sigma"] = Prior("loguniform", (max(1e-9 * scale, 1e-300), 10.0 * float(np.nanstd(series.intensity))))
     bounds = {n: p.bounds for n, p in free.items()}
     problem = Problem(table, series, free, like=like)

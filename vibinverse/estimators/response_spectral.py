@@ -27,6 +27,12 @@ def free_name(line_name: str, free: set[str]) -> str | None:
     return None
 
 
+def gain_from_level(series: Series, like: ResponseLikelihood) -> float:
+    """The sun.irradiance that makes the model's mean level the data's (the calibration gain)."""
+    rest = float(np.mean(like.mean({line.amplitude: 0.0 for line in like.lines()})))
+    return like.scene.sun.irradiance * float(np.nanmean(series.intensity)) / rest if rest > 0 else float("nan")
+
+
 def response_guesses(series: Series, like: ResponseLikelihood, bounds: dict[str, tuple[float, float]],
                      n_candidates: int = 3) -> list[dict[str, float]]:
     """Candidate starting values of the free parameters in `bounds` (names as the fit's), one per
@@ -34,8 +40,7 @@ def response_guesses(series: Series, like: ResponseLikelihood, bounds: dict[str,
     free = set(bounds)
     base: dict[str, float] = {}
     if "sun.irradiance" in free:
-        rest = like.mean({n: 0.0 for line in like.lines() for n in [line.amplitude]})
-        base["sun.irradiance"] = like.scene.sun.irradiance * float(np.nanmean(series.intensity) / np.mean(rest))
+        base["sun.irradiance"] = gain_from_level(series, like)
     lines = [ln for ln in like.lines() if free_name(ln.frequency, free) or free_name(ln.amplitude, free)
              or free_name(ln.phase, free)]
     nyq = 0.5 * series.fs
