@@ -56,6 +56,9 @@ def response_guesses(series: Series, like: ResponseLikelihood, bounds: dict[str,
         for i, line in enumerate(lines):
             f = f0 if i == 0 else None
             _line_guess(series, like, line, bounds, guess, f, nyq)
+        if "sun.irradiance" in free:  # the vibration has a mean of its own (its 2f term): refine the gain
+            model = like.mean(_as_free(guess, like, free))
+            guess["sun.irradiance"] *= float(np.nanmean(series.intensity[np.isfinite(model)]) / np.mean(model))
         if "noise.sigma" in free:
             values = _as_free(guess, like, free)
             resid = series.intensity - like.mean(values)
@@ -92,10 +95,11 @@ def _line_guess(series: Series, like: ResponseLikelihood, line: Line, bounds: di
     guess[line.amplitude] = float(amp)
     guess[line.phase] = float(np.angle(np.exp(1j * phase)))
     pname = free_name(line.phase, free)
-    if pname:  # the phase prior may be any 2 pi window: start inside it
+    if pname:  # the prior may be any window: start inside it, wrapped by the phase's period (pi
+        # for a line seen only at second order), not clipped to the window's edge
         lo, hi = bounds[pname]
-        centre = 0.5 * (lo + hi)
-        guess[line.phase] = float(centre + np.angle(np.exp(1j * (guess[line.phase] - centre))))
+        centre, period = 0.5 * (lo + hi), like.phase_period(line.phase)
+        guess[line.phase] = float(centre + (guess[line.phase] - centre + period / 2) % period - period / 2)
 
 
 def _as_free(guess: dict[str, float], like: ResponseLikelihood, free: set[str], keep_all: bool = False
