@@ -298,6 +298,20 @@ def taylor_surface_ac(motion: ModalMotion, x: NDArray[np.float64], y: NDArray[np
     return taylor_ac(jac, hess, motion.coefficients(t).T)
 
 
+def chebyshev_surface(surface: Surface, scene: Scene, x: NDArray[np.float64], y: NDArray[np.float64],
+                      box: NDArray[np.float64], rtol: float = DEFAULT_RTOL, cache: dict | None = None) -> SurfaceModel:
+    """X(q) of one modal surface on its subpixels (x, y), interpolated on Chebyshev-Lobatto grids
+    over the modal-coordinate box [-box, box] (1 or 2 coordinates): built once, it evaluates any
+    coordinates inside the box (`SurfaceModel.evaluate`), e.g. for new amplitudes and phases of
+    the same shapes. Its `error` is the nested grids' disagreement, as in `compile_scene`."""
+    facet = _facet_function(surface, scene.sun.direction, scene)
+    sx, sy, w = modal_points(surface.motion, x, y, cache)
+    value0 = float(facet(0.0, 0.0))
+    corners = np.array([-np.asarray(box, dtype=float), np.asarray(box, dtype=float)])
+    return _chebyshev(surface.name, 1.0, corners, lambda q: _mean_facet(facet, sx, sy, w, q), rtol, value0,
+                      _FLOAT64_FLOOR * abs(value0))
+
+
 def _mean_facet(facet, sx, sy, w, q):
     """mean_n F(S_n q) for each row of q (P, K), chunked."""
     q = np.atleast_2d(q)

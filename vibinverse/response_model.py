@@ -16,6 +16,7 @@ ADC's step^2 / 12 when the scene's [noise] has them. Gaps (NaN) are skipped; any
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -25,7 +26,7 @@ import numpy as np
 from forward.errors import SceneError
 from forward.motion import MOTION_KINDS
 from forward.motion.base import ModalMotion
-from forward.reduce import DEFAULT_RTOL, compile_scene, footprint_layout, taylor_surface_ac
+from forward.reduce import DEFAULT_RTOL, chebyshev_surface, compile_scene, footprint_layout, taylor_surface_ac
 from forward.scene_file import scene_from_table
 from forward.validation import Table
 from vibinverse.data import Series
@@ -208,7 +209,7 @@ class ResponseLikelihood:
         """(x at rest, x(t) - x at rest) at the given values: the AC part formed directly (Taylor),
         so that a signal ~1e-12 of the mean level keeps its digits in the likelihood."""
         scene_keys = {n: v for n, v in values.items() if self._kinds.get(n) == "scene"}
-        if scene_keys or self.model == "compiled":
+        if scene_keys:
             scene = scene_from_table(self._table(values))
             if self.model == "compiled":
                 return compile_scene(scene, self.t, DEFAULT_RTOL, shape_cache=self._cache).parts()
@@ -219,7 +220,29 @@ class ResponseLikelihood:
         for k, s in enumerate(self.scene.surfaces):
             if s.name in touched:
                 motions[k] = self._motion(s, values)
-        return self._taylor(self._layout0, motions, values.get("sun.irradiance", self.scene.sun.irradiance))
+        irradiance = values.get("sun.irradiance", self.scene.sun.irradiance)
+        if self.model == "compiled":
+            return self._interpolated(motions, irradiance)
+        return self._taylor(self._layout0, motions, irradiance)
+
+    def _interpolated(self, motions: list, irradiance: float) -> tuple[float, np.ndarray]:
+        """The compiled model for new motion values on the scene's geometry: each surface's X(q) is
+        interpolated once over a box of modal coordinates (`forward.reduce.chebyshev_surface`) and
+        reused while the coordinates stay inside it and the shapes do not change; a larger box is
+        built when they leave it."""
+        ac = np.zeros(self.t.size)
+        for k, x, y, weight, _ in self._layout0.moving:
+            q = motions[k].coefficients(self.t)
+            reach = np.abs(q).max(axis=0)
+            key = ("chebyshev", k, motions[k].shape_key())
+            model, box = self._cache.get(key, (None, np.zeros(reach.size)))
+            if model is None or np.any(reach > box):
+                box = 1.5 * np.maximum(reach, box)
+                moved = dataclasses.replace(self.scene.surfaces[k], motion=motions[k])
+                model = chebyshev_surface(moved, self.scene, x, y, box, DEFAULT_RTOL, self._cache)
+                self._cache[key] = (model, box)
+            ac += weight * (model.evaluate(*q.T) - model.value0)
+        return irradiance * self._layout0.rest, irradiance * ac
 
     def _taylor(self, layout: Any, motions: list, irradiance: float) -> tuple[float, np.ndarray]:
         ac = np.zeros(self.t.size)

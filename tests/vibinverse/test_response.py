@@ -179,10 +179,18 @@ def test_large_amplitude_switches_to_the_compiled_model():
     overrides = (LOW_RES, "noise.sigma=0.005")
     table, series = simulate("roof_elastic", *overrides, truth_overrides=("surfaces.roof.motion.center_deflection=0.02",),
                              seed=9)
-    _, summary = fitted(table, series)
+    problem, summary = fitted(table, series)
     assert summary["data"]["model"]["kind"] == "compiled"
     assert summary["data"]["model"]["error_bound_at_fit"] > 0.1 * 0.005
     assert all(abs(z) < 3.0 for z in z_scores(summary).values()), z_scores(summary)
+    # the compiled mean reuses one interpolant per surface over a box of modal coordinates (grown
+    # when left): it equals the scene compiled afresh at each value, to the compiler's rtol
+    like = problem.like
+    for values in ({R + "center_deflection": 0.02}, {R + "center_deflection": 0.035, R + "phase": 0.4, R + "frequency": 41.0},
+                   {R + "center_deflection": 0.001}):
+        level, ac = like.parts(values)
+        dc, ref = compile_scene(scene_from_table(like._table(values)), series.time).parts()
+        assert np.abs((level + ac) - (dc + ref)).max() <= 1e-5 * np.ptp(ref)
 
 
 # ------------------------------------------------------------------ bad input
