@@ -260,8 +260,9 @@ class ResponseLikelihood:
         table = Table(sub, prefix[:-1])
         return MOTION_KINDS[table.choice("kind", None, tuple(MOTION_KINDS))](table, surface.x, surface.y)
 
-    def variance(self, mean: np.ndarray, values: dict[str, float]) -> np.ndarray | float:
-        """Per-sample noise variance: sigma^2, shot noise at the mean, ADC step^2 / 12."""
+    def variance(self, mean: np.ndarray | None, values: dict[str, float]) -> np.ndarray | float:
+        """Per-sample noise variance: sigma^2, shot noise at the mean, ADC step^2 / 12 (the mean
+        is read only when the scene has shot noise or an ADC)."""
         noise = self.scene.noise
         sigma = values.get("noise.sigma", noise.sigma)
         var: np.ndarray | float = sigma * sigma
@@ -280,7 +281,8 @@ class ResponseLikelihood:
         # residuals about the data's mean level: y - x = (y - ref) - ((level - ref) + ac), so that
         # no sample's residual is a difference of two numbers at the mean level
         r = self._y_ref - ((level - self._ref) + ac[self._good])
-        var = self.variance(level + ac, values)
+        noise = self.scene.noise
+        var = self.variance(level + ac if noise.photons_per_unit > 0 or noise.adc_bits > 0 else None, values)
         if np.ndim(var):
             var = var[self._good]
         if not np.all(np.asarray(var) > 0):
