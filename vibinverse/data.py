@@ -6,6 +6,7 @@ problem raises SceneError with one line naming it.
 
 from __future__ import annotations
 
+import copy
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -147,3 +148,11 @@ def check_resolves(series: Series, frequency_hz: float, what: str) -> None:
     if frequency_hz * span < 3.0:
         raise SceneError(f"{what}: {frequency_hz:g} Hz needs at least {3.0 / frequency_hz:g} s of data "
                          f"(3 cycles); the series spans {span:g} s")
+
+
+def with_sampling(table: dict, series: Series) -> dict:
+    """The scene table sampled as the data are (its [sampling] only serves the scene's checks)."""
+    out = copy.deepcopy(table)
+    out["sampling"] = {"fs": series.fs, "duration": float(series.time[-1] - series.time[0]) + series.dt,
+                       "start": float(series.time[0])}
+    return out

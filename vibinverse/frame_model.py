@@ -23,7 +23,7 @@ from forward.errors import SceneError
 from forward.motion.frame import FrameParameters, _mode_zoh, linearize
 from forward.reduce import rigid_observation
 from forward.scene_file import scene_from_table
-from vibinverse.data import Series
+from vibinverse.data import Series, with_sampling
 from vibinverse.kalman import log_likelihood, njit
 from vibinverse.scene_keys import get_value, numeric_keys, set_value
 
@@ -88,7 +88,7 @@ class FrameLikelihood:
         self.t = series.time
         self.dt = series.dt
         self.key = f"surfaces.{self.roof}.motion."
-        scene = scene_from_table(self._with_sampling(self.base))
+        scene = scene_from_table(with_sampling(self.base, series))
         self.roof_surface = next(s for s in scene.surfaces if s.name == self.roof)
         self.x0, self.jac, self.hess = rigid_observation(scene, self.roof)
         m = self.base["surfaces"][self.roof]["motion"]
@@ -116,11 +116,6 @@ class FrameLikelihood:
         on_grid = np.max(np.abs(self.t - (self.t[0] + np.arange(self.t.size) * step))) <= 1e-9 * step
         self._grid = float(step) if on_grid and self.t.size > 1 else None
         self._observed: tuple[tuple, tuple] | None = None  # the last re-formed observation, by its values
-
-    def _with_sampling(self, table: dict) -> dict:
-        t = copy.deepcopy(table)
-        t["sampling"] = {"fs": 1.0 / self.dt, "duration": self.t[-1] - self.t[0] + self.dt, "start": float(self.t[0])}
-        return t
 
     def components(self, values: dict[str, float]) -> Components:
         """Mean signal and state-space matrices at the given parameter values (others from the base)."""
@@ -171,7 +166,7 @@ class FrameLikelihood:
             table = copy.deepcopy(self.base)
             for n, v in geo:
                 set_value(table, n, v)
-            scene = scene_from_table(self._with_sampling(table))
+            scene = scene_from_table(with_sampling(table, self.series))
             self._observed = (geo, rigid_observation(scene, self.roof))
         return self._observed[1]
 

@@ -29,7 +29,7 @@ from forward.motion.base import ModalMotion
 from forward.reduce import DEFAULT_RTOL, chebyshev_surface, compile_scene, footprint_layout, taylor_surface_ac
 from forward.scene_file import scene_from_table
 from forward.validation import Table
-from vibinverse.data import Series
+from vibinverse.data import Series, with_sampling
 from vibinverse.estimators.spectral import harmonics
 from vibinverse.scene_keys import get_value, numeric_keys, set_value
 
@@ -65,14 +65,6 @@ class Line:
 
     def names(self) -> tuple[str, str, str]:
         return self.frequency, self.amplitude, self.phase
-
-
-def with_sampling(table: dict, series: Series) -> dict:
-    """The scene table sampled as the data are (its [sampling] only serves the scene's checks)."""
-    out = copy.deepcopy(table)
-    out["sampling"] = {"fs": series.fs, "duration": float(series.time[-1] - series.time[0]) + series.dt,
-                       "start": float(series.time[0])}
-    return out
 
 
 class ResponseLikelihood:
