@@ -1,5 +1,5 @@
-"""Fisher information and Cramer-Rao bounds of the likelihoods' parameters (frame; deterministic
-scenes in `response_fisher`).
+"""Fisher information and Cramer-Rao bounds of the models' parameters (the frame model; the
+deterministic model in `response_fisher`).
 
 For y ~ N(mu(theta), Sigma(theta)):  I_ij = d_i mu^T Sigma^-1 d_j mu + tr(Sigma^-1 d_i Sigma Sigma^-1 d_j Sigma) / 2.
 
@@ -16,19 +16,23 @@ which are smooth closed forms: there is no simulated noise in them.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from scipy.linalg import toeplitz
 
-from vibinverse.frame_model import Components, FrameLikelihood
 from vibinverse.kalman import whiten
-from vibinverse.response_model import ResponseLikelihood
+
+if TYPE_CHECKING:
+    from vibinverse.models.deterministic import DeterministicModel
+    from vibinverse.models.frame import Components, FrameModel
 
 
 def _step(values: dict[str, float], name: str, rel_step: float) -> float:
     return rel_step * max(abs(values[name]), 1e-3)
 
 
-def mean_fisher(like: FrameLikelihood, values: dict[str, float], names: list[str],
+def mean_fisher(like: FrameModel, values: dict[str, float], names: list[str],
                 rel_step: float = 1e-6) -> np.ndarray:
     """Fisher information of `names` through the mean (the drive parameters enter only there)."""
     c = like.components(values)
@@ -77,7 +81,7 @@ def oversampling(c: Components, n: int, points_per_width: int = 4, limit: int = 
     return int(np.clip(np.ceil(points_per_width * 2 * np.pi / (n * width)), 1, limit))
 
 
-def covariance_fisher(like: FrameLikelihood, values: dict[str, float], names: list[str],
+def covariance_fisher(like: FrameModel, values: dict[str, float], names: list[str],
                       rel_step: float = 1e-6, oversample: int | None = None) -> np.ndarray:
     """Whittle's Fisher information of `names` through the covariance, (T / 4 pi) times the
     integral of d_i log S d_j log S over the circle, scaled by the fraction of samples observed
@@ -97,7 +101,7 @@ def covariance_fisher(like: FrameLikelihood, values: dict[str, float], names: li
     return 0.5 * observed * d @ d.T / oversample
 
 
-def covariance_fisher_dense(like: FrameLikelihood, values: dict[str, float], names: list[str],
+def covariance_fisher_dense(like: FrameModel, values: dict[str, float], names: list[str],
                             rel_step: float = 1e-6) -> np.ndarray:
     """The exact covariance term tr(Sigma^-1 d_i Sigma Sigma^-1 d_j Sigma) / 2 from the explicit
     T x T covariance (O(T^3): an oracle for short series, not for design sweeps)."""
@@ -122,7 +126,7 @@ def covariance_fisher_dense(like: FrameLikelihood, values: dict[str, float], nam
     return 0.5 * np.array([[np.sum(ai * aj.T) for aj in a] for ai in a])
 
 
-def frame_fisher(like: FrameLikelihood, values: dict[str, float], names: list[str]) -> np.ndarray:
+def frame_fisher(like: FrameModel, values: dict[str, float], names: list[str]) -> np.ndarray:
     """Mean plus covariance Fisher information of `names`."""
     return mean_fisher(like, values, names) + covariance_fisher(like, values, names)
 
@@ -142,7 +146,7 @@ def crlb_from_fisher(fisher: np.ndarray, names: list[str]) -> dict[str, float]:
     return dict(zip(names, sd.tolist()))
 
 
-def crlb_sd(like: FrameLikelihood, values: dict[str, float], names: list[str],
+def crlb_sd(like: FrameModel, values: dict[str, float], names: list[str],
             covariance: bool = False) -> dict[str, float]:
     """Cramer-Rao standard deviations of `names` (jointly estimated); with `covariance`, the
     information carried by the noise-driven resonances is counted too."""
@@ -150,9 +154,9 @@ def crlb_sd(like: FrameLikelihood, values: dict[str, float], names: list[str],
     return crlb_from_fisher(fisher, names)
 
 
-def response_fisher(like: ResponseLikelihood, values: dict[str, float], names: list[str],
+def response_fisher(like: DeterministicModel, values: dict[str, float], names: list[str],
                     rel_step: float = 1e-6) -> np.ndarray:
-    """Fisher information of a deterministic scene's parameters (`ResponseLikelihood`): the mean
+    """Fisher information of a deterministic scene's parameters (`DeterministicModel`): the mean
     term D^T diag(1/var) D over the observed samples, with D = d mu / d theta differenced on the
     AC part and the rest level separately (a 1e-12 signal keeps its digits), plus the variance
     term of noise.sigma, sum_k 2 sigma^2 / var_k^2. The variance is held fixed in the mean term

@@ -10,9 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vibinverse.fit import detections
-from vibinverse.output import write_all
-from vibinverse.result import read_summary
+from vibinverse.io.atomic import write_all
+from vibinverse.result import detections, read_result
 
 
 def _png(fig) -> str:
@@ -38,10 +37,10 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
     for n in d.get("multimodal", []) or []:
         out.append(f"{n} is multimodal: groups of walkers settled in separate modes. The summary mixes them; "
                    "look at the corner plot and consider a narrower prior or a model with the other mode fixed.")
-    for what, gain, threshold, detected in detections(d):
-        if not detected:
-            out.append(f"No {what} is detected: the fit with it is only {gain:.1f} in "
-                       f"log-likelihood above the fit without it (the threshold is {threshold:.1f}: 5 sigma, plus the "
+    for det in detections(d):
+        if not det.detected:
+            out.append(f"No {det.what} is detected: the fit with it is only {det.delta_loglike:.1f} in "
+                       f"log-likelihood above the fit without it (the threshold is {det.threshold:.1f}: 5 sigma, plus the "
                        "look-elsewhere term of a free frequency). Its numbers below are not a detection.")
     if draws is not None and draws.shape[0] > 10:
         corr = np.corrcoef(draws.T)
@@ -72,7 +71,7 @@ def write_report(result: Path, outdir: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    summary, idata = read_summary(result)
+    summary, idata = read_result(result)
     names = list(summary["parameters"])
     safe = json.loads(idata.observed_data.attrs["parameter_names"])
     draws = None

@@ -6,10 +6,12 @@ Numbers may be expressions ("pi/3 + 0.01"), as in scene files.
 
 from __future__ import annotations
 
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
-from forward.errors import SceneError
+from forward.errors import SceneError as ForwardSceneError
 from forward.validation import expression
+from vibinverse.errors import SceneError
 
 
 def get_value(table: dict, key: str) -> float:
@@ -24,8 +26,10 @@ def get_value(table: dict, key: str) -> float:
         if isinstance(node, list):
             node = node[idx if idx is not None else 0]
     if isinstance(node, str):
-        from forward.validation import expression
-        return expression(node, key)
+        try:
+            return expression(node, key)
+        except ForwardSceneError as exc:
+            raise SceneError(str(exc)) from None
     if isinstance(node, bool) or not isinstance(node, (int, float)):
         raise SceneError(f"{key}: not a number")
     return float(node)
@@ -73,7 +77,7 @@ def is_number(v: Any) -> bool:
         try:
             expression(v, "")
             return True
-        except SceneError:
+        except ForwardSceneError:
             return False
     return False
 

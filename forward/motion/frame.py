@@ -249,7 +249,7 @@ def steady_state(lin: LinearFrame, drive: Drive, t: NDArray[np.float64], coords=
     return q, dq
 
 
-def _mode_zoh(k: float, c: float, m: float, dt: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def mode_zoh(k: float, c: float, m: float, dt: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Exact ZOH (Phi, Gamma) of m q'' + c q' + k q = g for one coordinate (2 states).
 
     Underdamped (zeta <= 0.9, k > 0): the closed form of the matrix exponential of
@@ -315,7 +315,7 @@ def simulate_linear(params: FrameParameters, drive: Drive | None, noise_rms: flo
         g = a @ lin.force_spring.T  # generalized force per sample (n, 6)
         var = noise_rms**2 * np.einsum("ij,ij->i", lin.force_spring, lin.force_spring)
         for i in range(6):
-            phi, gam = _mode_zoh(lin.stiffness[i], lin.damping[i], lin.mass[i], 1.0 / fs)
+            phi, gam = mode_zoh(lin.stiffness[i], lin.damping[i], lin.mass[i], 1.0 / fs)
             x0 = np.zeros(2)
             if lin.damping[i] > 0 and base_noise is None:
                 p = solve_discrete_lyapunov(phi, var[i] * np.outer(gam, gam))

@@ -97,8 +97,8 @@ def test_extreme_damping_ratios_are_finite_and_stationary(zeta):
     lin = linearize(params)
     # stationary variance of a ZOH-driven oscillator, against the simulation (started stationary)
     from scipy.linalg import solve_discrete_lyapunov
-    from forward.motion.frame import _mode_zoh
-    phi, gam = _mode_zoh(lin.stiffness[3], lin.damping[3], lin.mass[3], 1 / 200.0)
+    from forward.motion.frame import mode_zoh
+    phi, gam = mode_zoh(lin.stiffness[3], lin.damping[3], lin.mass[3], 1 / 200.0)
     var_g = 1e-8 * lin.force_spring[3] @ lin.force_spring[3]
     p = solve_discrete_lyapunov(phi, var_g * np.outer(gam, gam))
     if zeta > 0.5:  # many independent cycles: the sample variance is sharp

@@ -339,7 +339,7 @@ def test_fast_likelihood_components_equal_the_forward_models_linear_frame():
 def test_mode_zoh_closed_form_equals_the_matrix_exponential():
     from scipy.linalg import expm
 
-    from forward.motion.frame import _mode_zoh
+    from forward.motion.frame import mode_zoh
 
     for zeta in (0.0, 1e-6, 0.0138, 0.5, 0.9, 0.95, 1.0, 2.0):  # above 0.9: the matrix exponential path
         for f, dt in ((3.46, 1 / 200), (99.0, 1 / 200), (0.1, 1e-3)):
@@ -348,7 +348,7 @@ def test_mode_zoh_closed_form_equals_the_matrix_exponential():
             aug = np.zeros((3, 3))
             aug[0, 1], aug[1, 0], aug[1, 1], aug[1, 2] = dt, -k / mass * dt, -c / mass * dt, dt / mass
             ref = expm(aug)
-            phi, gam = _mode_zoh(k, c, mass, dt)
+            phi, gam = mode_zoh(k, c, mass, dt)
             assert np.abs(phi - ref[:2, :2]).max() <= 1e-12 * np.abs(ref[:2, :2]).max()
             assert np.abs(gam - ref[:2, 2]).max() <= 1e-12 * np.abs(ref[:2, 2]).max()
 

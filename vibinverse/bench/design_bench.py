@@ -3,13 +3,16 @@ placement on the elastic roof) through the reduced model and the analytic Fisher
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 from forward.scene_file import read_table
 from vibinverse.design.sweep import run_design
 
+LOG = logging.getLogger(__name__).info
 
-def design_row(scene_path: Path, n: int, workers: tuple[int, ...] = (1, 2), log=print) -> dict:
+
+def design_row(scene_path: Path, n: int, workers: tuple[int, ...] = (1, 2), log=LOG) -> dict:
     """{"configurations", "seconds": {workers: s}, "ms_per_configuration": {workers: ms}}."""
     table = read_table(scene_path)
     vary = [f"sensor.offset=-0.04:0.04:{n}", f"footprint.center=0:25:{n}"]

@@ -16,8 +16,10 @@ analyst.
 
 from __future__ import annotations
 
+import logging
 import tempfile
 import time
+from dataclasses import dataclass
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -26,13 +28,13 @@ import numpy as np
 
 from forward.scene_file import apply_overrides, read_table, scene_from_table
 from forward.sensor import observe
-from dataclasses import dataclass
+from vibinverse.fisher import crlb_from_fisher
+from vibinverse.io.series import Series
+from vibinverse.models import build_model, model_class_for
+from vibinverse.pipeline import run as run_pipeline
+from vibinverse.posterior import Posterior
 
-from vibinverse.data import Series
-from vibinverse.fisher import crlb_from_fisher, frame_fisher, response_fisher
-from vibinverse.fit import free_defaults, run_fit
-from vibinverse.frame_model import is_frame, modal_table
-from vibinverse.problem import Problem
+LOG = logging.getLogger(__name__).info
 
 
 @dataclass(frozen=True)
@@ -65,10 +67,10 @@ def _table(scene_path: Path, sigma: float) -> dict:
     return apply_overrides(read_table(scene_path), [f"noise.sigma={sigma!r}"])
 
 
-def _problem(table: dict, seed: int) -> Problem:
+def _problem(table: dict, seed: int) -> Posterior:
     obs = observe(scene_from_table(table), seed)
     series = Series(obs.time, obs.intensity, f"seed {seed}", scene=table)
-    return Problem(table, series, free_defaults(table, series))
+    return Posterior(build_model(table, series))
 
 
 def _motion_key(table: dict) -> str:
@@ -82,8 +84,7 @@ def crlb(table: dict) -> dict[str, float]:
     prob = _problem(table, 0)
     names = prob.space.names
     values = {n: (v if v is not None else 0.0) for n, v in prob.truth().items()}
-    fisher = frame_fisher if prob.kind == "frame" else response_fisher
-    return crlb_from_fisher(fisher(prob.like, values, names), names)
+    return crlb_from_fisher(prob.model.fisher(values, names), names)
 
 
 def _fit(job: tuple) -> dict[str, Any]:
@@ -94,8 +95,8 @@ def _fit(job: tuple) -> dict[str, Any]:
     with threadpool_limits(1), tempfile.TemporaryDirectory() as tmp:
         prob = _problem(table, seed)
         t0 = time.perf_counter()
-        summary, _ = run_fit(prob, method, seed=seed, backend=Path(tmp) / "chain.h5", progress=False,
-                             max_steps=max_steps)
+        summary = run_pipeline(prob, method, seed=seed, backend=Path(tmp) / "chain.h5", progress=False,
+                               max_steps=max_steps).summary()
         elapsed = time.perf_counter() - t0
     truth = prob.truth()
     failed = method == "sindy" and summary["method"] != "sindy"
@@ -118,7 +119,7 @@ def _quiet(fn, *args):
 
 def run(scene_dir: Path, n_seeds: int = 20, n_coverage: int = 100, mcmc_seeds: int = 20,
         mcmc_snrs: tuple[int, ...] = (10,), snrs: tuple[int, ...] = (3, 10, 30), workers: int = 2,
-        max_steps: int = 20000, scenarios: tuple[str, ...] = ("frame", "plate"), log=print) -> dict[str, Any]:
+        max_steps: int = 20000, scenarios: tuple[str, ...] = ("frame", "plate"), log=LOG) -> dict[str, Any]:
     """The comparison over `scenarios` (scene files from `scene_dir`); returns {"rows": [...],
     "settings": {...}, "seconds": total}. Rows carry their scenario's name in "scene"."""
     t_start = time.perf_counter()
@@ -171,9 +172,9 @@ def _quiet_fit(job):
 
 def _actual_snr(table: dict) -> float:
     """The first line's SNR as `vibinverse design` computes it."""
-    from vibinverse.design.metrics import evaluate, default_targets
+    from vibinverse.design.metrics import default_targets, evaluate
 
-    row = evaluate(modal_table(table) if is_frame(table) else table, default_targets(table)[:1], {})
+    row = evaluate(model_class_for(table).truth_table(table), default_targets(table)[:1], {})
     return float(next(v for k, v in row.items() if k.startswith("snr ")))
 
 

@@ -6,6 +6,7 @@ of the fast path against the reference computed in the same run.
 
 from __future__ import annotations
 
+import logging
 import time
 from pathlib import Path
 from typing import Any
@@ -15,6 +16,8 @@ import numpy as np
 from forward.reduce import DEFAULT_RTOL, compile_scene
 from forward.render import pixel_signal
 from forward.scene_file import load_scene
+
+LOG = logging.getLogger(__name__).info
 
 SCENES = ("roof_elastic", "glass_brewster", "roof_frame", "ground_rayleigh")
 N_SAMPLES = 4000
@@ -32,7 +35,7 @@ def _timed(fn) -> tuple[Any, float]:
 
 
 def forward_rows(scene_dir: Path, resolution: int, n_samples: int = N_SAMPLES, rtol: float = DEFAULT_RTOL,
-                 log=print) -> list[dict]:
+                 log=LOG) -> list[dict]:
     """One row per example scene: dense reference vs fast path at the same resolution."""
     rows = []
     for name in SCENES:
@@ -50,7 +53,7 @@ def forward_rows(scene_dir: Path, resolution: int, n_samples: int = N_SAMPLES, r
     return rows
 
 
-def scaling_rows(scene_dir: Path, resolutions=(64, 256, 1024), samples=(1_000, 10_000, 100_000), log=print) -> list[dict]:
+def scaling_rows(scene_dir: Path, resolutions=(64, 256, 1024), samples=(1_000, 10_000, 100_000), log=LOG) -> list[dict]:
     """Fast-path time of the elastic roof over T samples and N subpixels: O(T + N), not O(T N)."""
     rows = []
     for res in resolutions:
@@ -62,7 +65,7 @@ def scaling_rows(scene_dir: Path, resolutions=(64, 256, 1024), samples=(1_000, 1
     return rows
 
 
-def speed_error_rows(scene_dir: Path, ref_res: int, n: int = 1000, coarse=(16, 32, 64), log=print) -> list[dict]:
+def speed_error_rows(scene_dir: Path, ref_res: int, n: int = 1000, coarse=(16, 32, 64), log=LOG) -> list[dict]:
     """Error against time for the fast path at several rtol and for the dense path at several
     resolutions, all against one dense reference (elastic roof)."""
     path = scene_dir / "roof_elastic.toml"
@@ -101,7 +104,7 @@ def plot_speed_error(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def run(scene_dir: Path, quick: bool, log=print) -> dict:
+def run(scene_dir: Path, quick: bool, log=LOG) -> dict:
     """The whole forward bench: quick uses 128^2 instead of 256^2 subpixels for the references."""
     res = 128 if quick else 256
     log(f"forward model: dense reference vs fast path, {res}x{res} subpixels, {N_SAMPLES} samples")

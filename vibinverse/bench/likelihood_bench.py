@@ -4,6 +4,7 @@ rendering; and the demo's MCMC wall time to convergence."""
 
 from __future__ import annotations
 
+import logging
 import json
 import tempfile
 import time
@@ -14,19 +15,22 @@ import numpy as np
 
 from forward.scene_file import load_scene
 from forward.sensor import observe
-from vibinverse.data import validate
-from vibinverse.fit import default_free, run_fit
+from vibinverse.io.series import validate
 from vibinverse.kalman import log_likelihood
-from vibinverse.problem import Problem
+from vibinverse.models import build_model
+from vibinverse.pipeline import run as run_pipeline
+from vibinverse.posterior import Posterior
+
+LOG = logging.getLogger(__name__).info
 
 KEY = "surfaces.roof.motion."
 
 
-def _problem(scene_path: Path) -> Problem:
+def _problem(scene_path: Path) -> Posterior:
     scene, table = load_scene(scene_path, ["noise.sigma=0.6"])
     o = observe(scene, seed=3)
     series = validate(o.time, o.intensity, "bench", table)
-    return Problem(table, series, default_free(KEY, table, series))
+    return Posterior(build_model(table, series))
 
 
 def _best(fn, number: int = 100, repeat: int = 5) -> float:
@@ -36,11 +40,11 @@ def _best(fn, number: int = 100, repeat: int = 5) -> float:
     return min(timeit.repeat(fn, number=number, repeat=repeat)) / number * 1e6
 
 
-def likelihood_row(scene_path: Path, log=print) -> dict:
+def likelihood_row(scene_path: Path, log=LOG) -> dict:
     prob = _problem(scene_path)
     values = prob.truth()
-    ours = _best(lambda: prob.like.log_likelihood(values))
-    c = prob.like.components(values)
+    ours = _best(lambda: prob.model.log_likelihood(values))
+    c = prob.model.components(values)
     resid = prob.series.intensity - c.mean
     filt = _best(lambda: log_likelihood(resid, c.phi, c.q, c.h, c.r, c.p0))
     row = {"samples": int(prob.series.time.size), "ours_us": ours, "ours_filter_only_us": filt}
@@ -65,11 +69,11 @@ def likelihood_row(scene_path: Path, log=print) -> dict:
     return row
 
 
-def demo_mcmc_row(scene_path: Path, log=print) -> dict:
+def demo_mcmc_row(scene_path: Path, log=LOG) -> dict:
     prob = _problem(scene_path)
     with tempfile.TemporaryDirectory() as d:
         t0 = time.perf_counter()
-        summary, _ = run_fit(prob, "auto", backend=Path(d) / "c.h5", max_steps=7000, progress=False)
+        summary = run_pipeline(prob, "auto", backend=Path(d) / "c.h5", max_steps=7000, progress=False).summary()
         wall = time.perf_counter() - t0
     diag = summary["diagnostics"]
     log(f"  demo fit: {wall:.1f} s ({summary['timing']['mcmc_s']:.1f} s MCMC), {diag['n_steps']} steps, "
@@ -78,21 +82,20 @@ def demo_mcmc_row(scene_path: Path, log=print) -> dict:
             "converged": diag["converged"], "rhat_max": diag["rhat_max"], "ess_min": diag["ess_min"]}
 
 
-def response_fit_row(scene_path: Path, log=print) -> dict:
+def response_fit_row(scene_path: Path, log=LOG) -> dict:
     """The deterministic-scene likelihood (elastic roof, sec. 4.1): one evaluation of ours (Taylor
     mean re-formed for new motion values) against rendering every subpixel at every sample, the
     error of ours against that reference relative to the noise, and a MAP fit's time and errors."""
     from forward.render import pixel_signal
     from forward.scene_file import scene_from_table
-    from vibinverse.fit import free_defaults
     from vibinverse.scene_keys import set_value
 
     scene, table = load_scene(scene_path, [])
     o = observe(scene, seed=1)
     series = validate(o.time, o.intensity, "bench", table)
-    prob = Problem(table, series, free_defaults(table, series))
+    prob = Posterior(build_model(table, series))
     values = {**prob.truth(), "surfaces.roof.motion.frequency": 40.3, "surfaces.roof.motion.center_deflection": 1.2e-3}
-    ours = _best(lambda: prob.like.log_likelihood(values))
+    ours = _best(lambda: prob.model.log_likelihood(values))
     other = json.loads(json.dumps(table))
     for n, v in values.items():
         if n != "noise.sigma":
@@ -100,9 +103,9 @@ def response_fit_row(scene_path: Path, log=print) -> dict:
     t0 = time.perf_counter()
     dense = pixel_signal(scene_from_table(other), series.time)
     dense_us = (time.perf_counter() - t0) * 1e6
-    error = float(np.abs(prob.like.mean(values) - dense).max()) / scene.noise.sigma
+    error = float(np.abs(prob.model.mean(values) - dense).max()) / scene.noise.sigma
     t0 = time.perf_counter()
-    summary, _ = run_fit(prob, "map", progress=False)
+    summary = run_pipeline(prob, "map", progress=False).summary()
     map_s = time.perf_counter() - t0
     z = {n: (p["median"] - p["truth"]) / p["sd"] for n, p in summary["parameters"].items() if p["sd"]}
     log(f"  elastic roof, {series.time.size} samples: ours {ours:.0f} us per log-likelihood, dense rendering "

@@ -16,77 +16,65 @@ white noise).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from forward.errors import SceneError
-from forward.motion.frame import FrameMotion
+from collections.abc import Callable
+
+from forward.errors import SceneError as ForwardSceneError
 from forward.motion import MOTION_KINDS
+from forward.motion.frame import FrameMotion
 from forward.reduce import compile_scene, footprint_layout, taylor_surface_ac
-from forward.validation import Table
 from forward.scene import Noise, Scene
 from forward.scene_file import scene_from_table
-from vibinverse.data import Series
+from forward.validation import Table
+from vibinverse.errors import SceneError
 from vibinverse.fisher import crlb_from_fisher, frame_fisher, spectrum_at
-from vibinverse.estimators.spectral import sinusoid
-from vibinverse.frame_model import FrameLikelihood, frame_surface, is_frame, modal_table
+from vibinverse.io.series import Series
+from vibinverse.models import DeterministicModel, FrameModel, model_class_for
 from vibinverse.scene_keys import get_value, set_value
+from vibinverse.spectrum import sinusoid
 
 # Design evaluates every configuration with the second-order (Taylor) reduced model: one model
 # for a configuration and its perturbations, so that derivatives are smooth, at ~ms per scene.
 # Its error estimate (relative to the peak-to-peak signal) is reported per row as model_error.
 DESIGN_MODEL = "taylor2"
-_AMPLITUDE_KEYS = ("center_deflection", "amplitude", "pressure", "boundary_amplitude")
 
 
 def default_targets(table: dict) -> list[str]:
     """Frequency and amplitude of each vibration: for a frame, its tilt resonance, damping ratio
-    and first drive line."""
-    if is_frame(table):
-        k = f"surfaces.{frame_surface(table)}.motion."
-        out = [k + "tilt_frequency", k + "tilt_damping_ratio"]
-        if (table["surfaces"][frame_surface(table)]["motion"].get("drive_frequency") or []):
-            out += [k + "drive_frequency", k + "drive_amplitude"]
-        return out
-    out = []
-    for name, s in (table.get("surfaces") or {}).items():
-        motion = s.get("motion") or {}
-        if not motion:
-            continue
-        k = f"surfaces.{name}.motion."
-        out.append(k + "frequency")
-        out += [k + a for a in _AMPLITUDE_KEYS if a in motion][:1]
-    return out
+    and first drive line (`SignalModel.default_targets`)."""
+    return model_class_for(table).default_targets(table)
 
 
 def check_targets(table: dict, targets: list[str]) -> None:
     """One-line errors for targets that are not numbers of this scene (or not fittable)."""
-    if is_frame(table):
-        like_names = _frame_fittable(table)
-        for t in targets:
-            if t not in like_names:
-                raise SceneError(f"--target {t}: not a parameter of this frame scene; choose from "
-                                 f"{', '.join(sorted(like_names))}")
-        return
-    for t in targets:
-        try:
-            get_value(table, t)
-        except SceneError as exc:
-            raise SceneError(f"--target {exc}") from None
-
-
-def _frame_fittable(table: dict) -> set[str]:
-    t = scene_from_table(table).sampling.times()
-    return FrameLikelihood(table, Series(t, np.zeros(t.size), "design")).fittable()
+    DESIGNS[model_class_for(table).name].check_targets(table, targets)
 
 
 def evaluate(table: dict, targets: list[str], cache: dict) -> dict[str, Any]:
     """Metrics of the configuration `table` (a complete scene table)."""
     scene = scene_from_table(table)
-    if is_frame(table):
-        return _frame_metrics(table, scene, targets, cache)
-    return _deterministic_metrics(table, scene, targets, cache)
+    return DESIGNS[model_class_for(table).name].metrics(table, scene, targets, cache)
+
+
+def _deterministic_targets(table: dict, targets: list[str]) -> None:
+    for t in targets:
+        try:
+            get_value(table, t)
+        except ForwardSceneError as exc:
+            raise SceneError(f"--target {exc}") from None
+
+
+def _frame_targets(table: dict, targets: list[str]) -> None:
+    t = scene_from_table(table).sampling.times()
+    names = FrameModel(table, Series(t, np.zeros(t.size), "design")).fittable()
+    for target in targets:
+        if target not in names:
+            raise SceneError(f"--target {target}: not a parameter of this frame scene; choose from "
+                             f"{', '.join(sorted(names))}")
 
 
 def _sensitivity(dc: float, ac: np.ndarray) -> float:
@@ -209,7 +197,7 @@ def _bounds(table: dict, targets: list[str], crlb: dict[str, float]) -> dict[str
 
 def _frame_metrics(table: dict, scene: Scene, targets: list[str], cache: dict) -> dict[str, Any]:
     t = scene.sampling.times()
-    like = FrameLikelihood(table, Series(t, np.zeros(t.size), "design"))
+    like = FrameModel(table, Series(t, np.zeros(t.size), "design"))
     base = like.base
     k = like.key
     n_lines = len(base["surfaces"][like.roof]["motion"].get("drive_frequency") or [])
@@ -232,7 +220,7 @@ def _frame_metrics(table: dict, scene: Scene, targets: list[str], cache: dict) -
         row[f"snr {float(f):g} Hz"] = amp / np.sqrt(2 * level / t.size)
     crlb = crlb_from_fisher(frame_fisher(like, values, names), names)
     crlb = {orig: crlb[c] for orig, c in zip(targets, canonical)}
-    return {**row, **_bounds(modal_table(table), targets, crlb)}
+    return {**row, **_bounds(FrameModel.truth_table(table), targets, crlb)}
 
 
 def _canonical(name: str, key: str) -> str:
@@ -246,7 +234,23 @@ def _canonical(name: str, key: str) -> str:
 def _value(table: dict, name: str) -> float:
     try:
         return get_value(table, name)
-    except SceneError:
+    except ForwardSceneError:
         if "drive_phase" in name:
             return 0.0
         raise
+
+
+@dataclass(frozen=True)
+class Design:
+    """How design evaluates one signal model's configurations."""
+
+    check_targets: Callable[[dict, list[str]], None]
+    metrics: Callable[[dict, Scene, list[str], dict], dict[str, Any]]
+
+
+# one entry per registered signal model (by its registry name)
+DESIGNS: dict[str, Design] = {
+    FrameModel.name: Design(_frame_targets, _frame_metrics),
+    DeterministicModel.name: Design(_deterministic_targets, _deterministic_metrics),
+}
+

@@ -6,15 +6,16 @@ from __future__ import annotations
 import itertools
 import math
 from pathlib import Path
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
+
+from vibinverse.design.ranking import score
 
 
 def plot_design(result: dict[str, Any]) -> dict[str, Callable[[Path], None]]:
     """{"design_sensitivity.png": writer, "design_crlb.png": writer}."""
-    from vibinverse.design.sweep import score
-
     targets = result["targets"]
     sens = lambda r: r["sensitivity"] if r.get("status") == "ok" else math.nan
     worst = lambda r: score(r, targets) if r.get("status") == "ok" else math.nan

@@ -11,11 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from forward.errors import SceneError
+from vibinverse.errors import SceneError
 from forward.materials import Fresnel
 from forward.scene_file import scene_from_table
 from vibinverse.design import metrics
+from vibinverse.design.plots import plot_design
+from vibinverse.design.ranking import rank
 from vibinverse.design.spec import Axis, configure, grid, parse_vary
+from vibinverse.io.atomic import write_all
 
 PAPER_THRESHOLD = 1e-4  # the paper's detectability threshold on the sensitivity (21)
 N_BEST = 10
@@ -116,23 +119,8 @@ def _evaluate_configs(table, configs, targets, progress) -> list[dict[str, Any]]
     return out
 
 
-def score(row: dict[str, Any], targets: list[str]) -> float:
-    """The worst relative Cramer-Rao sd over the targets: the parameter pinned worst decides."""
-    rel = [row.get(f"rel_crlb {t}", math.inf) for t in targets]
-    return max(rel) if rel else math.inf
-
-
-def rank(rows: list[dict[str, Any]], targets: list[str], threshold: float) -> list[dict[str, Any]]:
-    """Configurations that work, detectable ones (S >= threshold) first, then by `score`, then by S."""
-    ok = [r for r in rows if r.get("status") == "ok"]
-    return sorted(ok, key=lambda r: (r["sensitivity"] < threshold, score(r, targets), -r["sensitivity"]))
-
-
 def write_design(result: dict[str, Any], outdir: Path) -> list[Path]:
     """design.csv, design.json and the PNG maps, all or nothing."""
-    from vibinverse.design.plots import plot_design
-    from vibinverse.output import write_all
-
     rows, axes = result["rows"], result["axes"]
     columns = list(dict.fromkeys(k for r in rows for k in r if k != "status")) + ["status"]
 

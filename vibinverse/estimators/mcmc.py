@@ -4,31 +4,35 @@ a progress bar."""
 
 from __future__ import annotations
 
+import logging
 import signal
+import warnings
 from contextlib import contextmanager
 from multiprocessing import get_context
 from pathlib import Path
+from typing import Any
 
 import emcee
 import numpy as np
 
-from vibinverse.problem import Problem
+from vibinverse.errors import InputError, Interrupted
+from vibinverse.estimators.base import Estimator, base_result, register_estimator
+from vibinverse.posterior import Posterior
+from vibinverse.result import FitResult
+
+logger = logging.getLogger(__name__)
 
 CHECK_EVERY = 100
 TAU_FACTOR = 50
 
 
-_WORKER_PROBLEM: Problem | None = None
+_WORKER_PROBLEM: Posterior | None = None
 
 
 def _worker_log_prob(z: np.ndarray) -> float:
     """The log posterior in a pool worker: the problem is inherited once through fork, not pickled
     with every batch of walkers (which made a 2-worker pool 5x slower than none)."""
     return _WORKER_PROBLEM.log_posterior(z)
-
-
-class Interrupted(Exception):
-    """The run was stopped by SIGINT/SIGTERM after a complete step; the backend is intact."""
 
 
 @contextmanager
@@ -46,7 +50,7 @@ def _stop_on_signals():
             signal.signal(s, h)
 
 
-def run(problem: Problem, z_map: np.ndarray, cov_z: np.ndarray, backend_path: Path, *, resume: bool = False,
+def run(problem: Posterior, z_map: np.ndarray, cov_z: np.ndarray, backend_path: Path, *, resume: bool = False,
         nwalkers: int | None = None, max_steps: int = 20000, workers: int = 1, seed: int = 0,
         progress: bool = True) -> dict:
     """Sample until converged or `max_steps`; returns chain, log_prob, tau and the stopping facts."""
@@ -105,3 +109,59 @@ def _converged(backend) -> tuple[bool, np.ndarray]:
         return False, np.full(backend.shape[1], np.inf)
     tau = backend.get_autocorr_time(tol=0)
     return bool(np.all(np.isfinite(tau)) and n >= TAU_FACTOR * tau.max()), tau
+
+
+def multimodal(values: np.ndarray, names: list[str], separation: float = 5.0) -> list[str]:
+    """Parameters whose walkers sit in separate groups: sorted walker means with a gap wider than
+    `separation` times the typical within-walker sd, and at least 2 walkers on each side. An
+    ensemble sampler's walkers do not cross between well-separated modes, so this is how a second
+    mode shows. values: (walker, draw, parameter)."""
+    out = []
+    for j, n in enumerate(names):
+        means = np.sort(values[:, :, j].mean(axis=1))
+        within = float(np.median(values[:, :, j].std(axis=1)))
+        gaps = np.diff(means)
+        k = int(np.argmax(gaps)) if gaps.size else -1
+        if k >= 1 and k <= len(means) - 3 and gaps[k] > separation * max(within, 1e-300):
+            out.append(n)
+    return out
+
+
+def sampler_diagnostics(values: np.ndarray, res: dict) -> dict:
+    """Split R-hat and bulk ESS from ArviZ over walkers (chain = walker), emcee's tau."""
+    import arviz as az
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = az.convert_to_dataset({f"p{j}": values[..., j] for j in range(values.shape[-1])})
+        rhat = float(np.nanmax([az.rhat(ds)[v].item() for v in ds.data_vars]))
+        ess = float(np.nanmin([az.ess(ds)[v].item() for v in ds.data_vars]))
+    return {"rhat_max": rhat, "ess_min": ess, "tau_max": float(np.nanmax(res["tau"])), "n_steps": int(res["n_steps"]),
+            "nwalkers": int(res["nwalkers"]), "acceptance": res["acceptance"],
+            "converged": bool(res["converged"] and rhat < 1.05)}
+
+
+@register_estimator
+class Emcee(Estimator):
+    """emcee from the MAP of the stage before (its point and Laplace covariance in z), run to
+    >= 50 tau; the first max(3 tau, half) of the chain is burn-in."""
+
+    name = "mcmc"
+
+    def estimate(self, posterior: Posterior, start: FitResult | None, *, backend: Path | None = None,
+                 resume: bool = False, workers: int = 1, seed: int = 0, max_steps: int = 20000,
+                 progress: bool = True, **options: Any) -> FitResult:
+        if start is None or start.z is None or start.cov_z is None:
+            raise InputError("mcmc: needs a MAP start (a result with z and cov_z); run a MAP estimator first")
+        backend = Path(backend or "vibinverse-chain.h5")
+        logger.info("sampling with emcee (checkpoint %s) ...", backend)
+        res = run(posterior, start.z, start.cov_z, backend, resume=resume, workers=workers, seed=seed,
+                  max_steps=max_steps, progress=progress)
+        chain = res["chain"]
+        tau = res["tau"]
+        burn = int(min(chain.shape[0] // 2, 3 * np.nanmax(tau) if np.all(np.isfinite(tau)) else chain.shape[0] // 2))
+        kept = chain[burn:]
+        values = np.array([[list(posterior.values(z).values()) for z in walker] for walker in kept.transpose(1, 0, 2)])
+        diagnostics = {**sampler_diagnostics(values, res), "multimodal": multimodal(values, posterior.space.names)}
+        return base_result(posterior, self.name, start.point, chains=values, log_prob=res["log_prob"][burn:].T,
+                           z=start.z, cov_z=start.cov_z, log_post=start.log_post, diagnostics=diagnostics)

@@ -28,13 +28,20 @@ line's observed amplitude over the model's response per unit drive), as in the s
 
 from __future__ import annotations
 
+import logging
 import warnings
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from vibinverse.data import Series
-from vibinverse.frame_model import FrameLikelihood
+from vibinverse.errors import Unsupported
+from vibinverse.estimators.base import Estimator, base_result, register_estimator
+from vibinverse.io.series import Series
+from vibinverse.posterior import Posterior
+from vibinverse.result import FitResult
+
+logger = logging.getLogger(__name__)
 
 SEGMENTS = 4
 MAX_REL_SD = 0.10  # jackknife scatter of the frequency above which the identification is declined
@@ -47,7 +54,27 @@ class SindyFailed(RuntimeError):
     """SINDy declined: the message says why."""
 
 
-def first_order_ratio(like: FrameLikelihood, values: dict[str, float]) -> float:
+@runtime_checkable
+class ResonanceModel(Protocol):
+    """What SINDy reads of a model: a tilt resonance in state-space form seen through a pixel's
+    observation (the frame model)."""
+
+    key: str
+    jac: np.ndarray
+    hess: np.ndarray
+
+    def components(self, values: dict[str, float]) -> Any: ...
+
+    def drive_frequencies(self, values: dict[str, float]) -> list[float]: ...
+
+    def log_likelihood(self, values: dict[str, float]) -> float: ...
+
+    def calibrated_guess(self, drive_frequency: float | None, resonance: tuple[float, float]) -> dict[str, float]: ...
+
+    def resonance_values(self) -> dict[str, float]: ...
+
+
+def first_order_ratio(like: ResonanceModel, values: dict[str, float]) -> float:
     """How much the pixel's first-order term exceeds its second-order term at the typical tilt:
     |J| g / (|H| g^2 / 2), with g the tilt's stationary rms plus the drive's tilt amplitude."""
     c = like.components({**values, like.key + "drive_amplitude": 0.0})
@@ -115,14 +142,7 @@ def free_response_misfit(r_corr: np.ndarray, dt_unit: float, w: float, zeta: flo
     return float(np.sqrt(np.mean(resid**2) / np.mean(x**2)))
 
 
-def drive_lines(like: FrameLikelihood, values: dict[str, float]) -> list[float]:
-    """Every drive line's frequency: from `values` where given ("drive_frequency" is line 0), else
-    the scene's."""
-    n = len(like.base["surfaces"][like.roof]["motion"].get("drive_frequency") or [])
-    return [like._line(values, "drive_frequency", i) for i in range(n)]
-
-
-def sindy_frame(series: Series, like: FrameLikelihood, start: dict[str, float]) -> dict:
+def sindy_frame(series: Series, like: ResonanceModel, start: dict[str, float]) -> dict:
     """Identify the tilt resonance and damping ratio (and, through the forward model, the drive
     amplitude) starting from the spectral stage's `start`. Raises SindyFailed with the reason."""
     k = like.key
@@ -134,7 +154,7 @@ def sindy_frame(series: Series, like: FrameLikelihood, start: dict[str, float]) 
     t, y = series.time, series.intensity
     mask = np.isfinite(y)
     resid = np.where(mask, y - np.nanmean(y), 0.0)
-    lines = drive_lines(like, start)
+    lines = like.drive_frequencies(start)
     if lines:
         basis = np.concatenate([[np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)] for f in lines] + [[np.ones_like(t)]]).T
         coef = np.linalg.lstsq(basis[mask], resid[mask], rcond=None)[0]
@@ -184,10 +204,7 @@ def sindy_frame(series: Series, like: FrameLikelihood, start: dict[str, float]) 
     values = dict(start)
     values[k + "tilt_frequency"] = float(f_t)
     values[k + "tilt_damping_ratio"] = float(zeta)
-    from vibinverse.estimators.spectral import frame_guess
-
-    bounds = {k + "tilt_frequency": (f_t, f_t)}
-    refit = frame_guess(series, like, bounds, start.get(k + "drive_frequency"), resonance=(f_t, zeta))
+    refit = like.calibrated_guess(start.get(k + "drive_frequency"), (f_t, zeta))
     for n in (k + "drive_amplitude", k + "drive_phase", k + "noise_rms", "noise.sigma"):
         if n in refit:
             values[n] = refit[n]
@@ -200,7 +217,7 @@ def _equation(w: float, c: float) -> str:
     return f"q'' = -{w**2:.6g} q - {c:.4g} q' + drive lines + white forcing"
 
 
-def sindy_best(series: Series, like: FrameLikelihood, starts: list[dict[str, float]]) -> dict:
+def sindy_best(series: Series, like: ResonanceModel, starts: list[dict[str, float]]) -> dict:
     """SINDy from each spectral candidate (which line is the drive and which peak the resonance),
     keeping the identification the exact likelihood prefers; SindyFailed if every one declines."""
     results, reasons = [], []
@@ -215,3 +232,44 @@ def sindy_best(series: Series, like: FrameLikelihood, starts: list[dict[str, flo
     if not results:
         raise SindyFailed(reasons[0] if len(set(reasons)) == 1 else "; ".join(dict.fromkeys(reasons)))
     return max(results, key=lambda r: r["log_likelihood"] if np.isfinite(r["log_likelihood"]) else -np.inf)
+
+
+@register_estimator
+class SindyEstimator(Estimator):
+    """SINDy on the correlation function (`sindy_best`) from the spectral stage's candidates.
+
+    The result's method is "sindy" with jackknife sds when the identification holds; when it is
+    declined, the spectral start with `diagnostics["sindy"]` saying why (method "spectral"). Its
+    `starts` put the identified values first, for the MAP."""
+
+    name = "sindy"
+
+    @staticmethod
+    def covers(posterior: Posterior) -> bool:
+        """Whether the model has a resonance SINDy can identify."""
+        return isinstance(posterior.model, ResonanceModel)
+
+    def estimate(self, posterior: Posterior, start: FitResult | None, **options: Any) -> FitResult:
+        if not self.covers(posterior):
+            raise Unsupported("--method sindy: SINDy identifies a noise-driven resonance (a frame scene); this "
+                              "scene's motion is deterministic: use spectral, map, mcmc or auto")
+        if start is None:
+            from vibinverse.estimators.spectral import SpectralEstimator
+
+            start = SpectralEstimator().fit(posterior)
+        names, priors = posterior.space.names, dict(zip(posterior.space.names, posterior.space.priors))
+        model = posterior.model
+        starts = start.starts or [start.point]
+        try:
+            res = sindy_best(posterior.series, model, [{**model.resonance_values(), **s} for s in starts])
+        except SindyFailed as exc:
+            logger.info("%s; continuing without it", exc)
+            info = {"status": "declined", "reason": str(exc)}
+            return base_result(posterior, "spectral", start.point, starts=starts,
+                               diagnostics={"converged": None, "sindy": info})
+        values = {n: priors[n].inside(res["values"].get(n, s)) for n, s in starts[0].items() if n in priors}
+        sd = {n: v for n, v in res["sd"].items() if n in values}
+        logger.info("sindy: %s", res["equation"])
+        info = {"status": "ok", "equation": res["equation"], "misfit": res["misfit"]}
+        return base_result(posterior, "sindy", values, sd=sd, starts=[values, *starts],
+                           diagnostics={"converged": None, "sindy": info})

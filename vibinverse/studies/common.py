@@ -14,8 +14,8 @@ from forward.reduce import compile_scene
 from forward.render import pixel_signal, sensitivity
 from forward.scene import Scene
 from forward.scene_file import load_scene
-from vibinverse.builtin import builtin_scene
-from vibinverse.output import write_all
+from vibinverse.io.builtin import builtin_scene
+from vibinverse.io.atomic import write_all
 
 def scene_path(name: str) -> Path:
     """A built-in scene by name (see vibinverse.builtin)."""

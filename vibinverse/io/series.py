@@ -1,7 +1,7 @@
 """Measured series: read CSV / .npy / .npz / netCDF, validate, and report gaps.
 
 A NaN intensity is a gap (a missing sample): kept, counted and handled by the likelihoods. Every
-problem raises SceneError with one line naming it.
+problem raises `vibinverse.errors.DataError` with one line naming it.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from forward.errors import SceneError
+from vibinverse.errors import DataError, InputError
 
 
 @dataclass(frozen=True)
@@ -59,34 +59,34 @@ def load_series(path: str | Path) -> Series:
     .npz (arrays 'time' and 'intensity'), netCDF (.nc; variables 'time' and 'intensity')."""
     p = Path(path)
     if not p.is_file():
-        raise SceneError(f"data: file not found: {p}")
+        raise DataError(f"data: file not found: {p}")
     suffix = p.suffix.lower()
     scene = None
     try:
         if suffix == ".npy":
             arr = np.load(p, allow_pickle=False)
             if arr.ndim != 2 or arr.shape[1] < 2:
-                raise SceneError(f"data: {p} must hold an N x 2 array (time, intensity), got shape {arr.shape}")
+                raise DataError(f"data: {p} must hold an N x 2 array (time, intensity), got shape {arr.shape}")
             t, x = arr[:, 0], arr[:, 1]
         elif suffix == ".npz":
             with np.load(p, allow_pickle=False) as z:
                 if "time" not in z or "intensity" not in z:
-                    raise SceneError(f"data: {p} needs arrays 'time' and 'intensity', has {sorted(z.files)}")
+                    raise DataError(f"data: {p} needs arrays 'time' and 'intensity', has {sorted(z.files)}")
                 t, x = z["time"], z["intensity"]
         elif suffix in (".nc", ".netcdf", ".cdf"):
             import xarray as xr
 
             with xr.open_dataset(p) as ds:
                 if "intensity" not in ds:
-                    raise SceneError(f"data: {p} has no variable 'intensity'")
+                    raise DataError(f"data: {p} has no variable 'intensity'")
                 x = ds["intensity"].values
                 t = ds["time"].values if "time" in ds.variables else ds["intensity"][ds["intensity"].dims[0]].values
         else:
             t, x, scene = _read_csv(p)
-    except SceneError:
+    except DataError:
         raise
     except (OSError, ValueError) as exc:
-        raise SceneError(f"data: cannot read {p}: {str(exc).splitlines()[0]}") from None
+        raise DataError(f"data: cannot read {p}: {str(exc).splitlines()[0]}") from None
     return validate(np.asarray(t, dtype=float), np.asarray(x, dtype=float), str(p), scene)
 
 
@@ -108,14 +108,14 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray, dict | None]:
             if header is None:
                 header = cells
                 if "time" not in header or "intensity" not in header:
-                    raise SceneError(f"data: {p} header must name columns time and intensity, got {','.join(header)}")
+                    raise DataError(f"data: {p} header must name columns time and intensity, got {','.join(header)}")
                 continue
             try:
                 rows.append((float(cells[header.index("time")]), float(cells[header.index("intensity")] or "nan")))
             except (ValueError, IndexError):
-                raise SceneError(f"data: {p} line {n}: not a number: {s[:60]}") from None
+                raise DataError(f"data: {p} line {n}: not a number: {s[:60]}") from None
     if header is None:
-        raise SceneError(f"data: {p} has no header row time,intensity")
+        raise DataError(f"data: {p} has no header row time,intensity")
     arr = np.array(rows, dtype=float).reshape(-1, 2)
     return arr[:, 0], arr[:, 1], scene
 
@@ -123,18 +123,18 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray, dict | None]:
 def validate(t: np.ndarray, x: np.ndarray, source: str = "array", scene: dict | None = None) -> Series:
     """Check a series; NaN intensities are gaps, anything else non-finite is an error."""
     if t.ndim != 1 or x.ndim != 1 or t.size != x.size:
-        raise SceneError(f"data: time and intensity must be 1-D of equal length, got {t.shape} and {x.shape}")
+        raise DataError(f"data: time and intensity must be 1-D of equal length, got {t.shape} and {x.shape}")
     if t.size < 16:
-        raise SceneError(f"data: {t.size} samples; at least 16 are needed")
+        raise DataError(f"data: {t.size} samples; at least 16 are needed")
     if not np.all(np.isfinite(t)):
-        raise SceneError("data: time has non-finite values")
+        raise DataError("data: time has non-finite values")
     if not np.all(np.diff(t) > 0):
         k = int(np.argmin(np.diff(t) > 0))
-        raise SceneError(f"data: time must be strictly increasing (sample {k + 1}: {t[k + 1]:g} after {t[k]:g})")
+        raise DataError(f"data: time must be strictly increasing (sample {k + 1}: {t[k + 1]:g} after {t[k]:g})")
     if np.any(np.isinf(x)):
-        raise SceneError("data: intensity has infinite values (use NaN for missing samples)")
+        raise DataError("data: intensity has infinite values (use NaN for missing samples)")
     if np.isfinite(x).sum() < 16:
-        raise SceneError(f"data: only {int(np.isfinite(x).sum())} valid samples; at least 16 are needed")
+        raise DataError(f"data: only {int(np.isfinite(x).sum())} valid samples; at least 16 are needed")
     return Series(t, x, source, scene)
 
 
@@ -143,10 +143,10 @@ def check_resolves(series: Series, frequency_hz: float, what: str) -> None:
     3 cycles in the record."""
     nyquist = 0.5 * series.fs
     if frequency_hz >= nyquist:
-        raise SceneError(f"{what}: {frequency_hz:g} Hz is at or above the Nyquist frequency {nyquist:g} Hz of the data")
+        raise InputError(f"{what}: {frequency_hz:g} Hz is at or above the Nyquist frequency {nyquist:g} Hz of the data")
     span = series.time[-1] - series.time[0]
     if frequency_hz * span < 3.0:
-        raise SceneError(f"{what}: {frequency_hz:g} Hz needs at least {3.0 / frequency_hz:g} s of data "
+        raise InputError(f"{what}: {frequency_hz:g} Hz needs at least {3.0 / frequency_hz:g} s of data "
                          f"(3 cycles); the series spans {span:g} s")
 
 

@@ -1,25 +1,22 @@
-"""The `vibinverse` command line.
-
-Bad input exits with code 2 and one line on stderr naming the problem; no traceback and no
-partial output file.
-"""
+"""The verbs of the `vibinverse` command line: argument parsing and printing over the public API
+(`vibinverse.api`); no logic the API lacks."""
 
 from __future__ import annotations
 
 import argparse
-import sys
+import json
+import logging
 from pathlib import Path
 
-import numpy as np
-
-from forward.errors import SceneError
 from forward.reduce import DEFAULT_RTOL, compile_scene
-from forward.scene_file import load_scene
-from forward.sensor import observe
-from vibinverse import __version__
-from vibinverse.builtin import builtin_scene
-from vibinverse.output import write_all
-from vibinverse.simulation_io import plot_series, write_series_csv
+from vibinverse import __version__, api
+from vibinverse.errors import InputError, scene_errors
+from vibinverse.io.atomic import write_all
+from vibinverse.io.builtin import builtin_scene
+from vibinverse.io.scenes import read_scene
+from vibinverse.io.simulation import plot_series, write_series_csv
+
+logger = logging.getLogger("vibinverse")
 
 DEMO_SCENE = "roof_frame.toml"
 DEMO_SET = ("noise.sigma=0.6",)  # drive-line SNR ~10 (README: how SNR is defined)
@@ -27,7 +24,7 @@ DEMO_SET = ("noise.sigma=0.6",)  # drive-line SNR ~10 (README: how SNR is define
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (argparse prints usage too)
-        raise SceneError(f"{self.prog}: {message}")
+        raise InputError(f"{self.prog}: {message}")
 
 
 def _output_dir(path: str) -> Path:
@@ -36,16 +33,17 @@ def _output_dir(path: str) -> Path:
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise SceneError(f"-o: cannot create directory {out}: {exc.strerror or exc}") from None
+        raise InputError(f"-o: cannot create directory {out}: {exc.strerror or exc}") from None
     return out
 
 
 def _simulate_to(scene_path: Path, overrides: list[str], seed: int | None, out: Path, plot: Path | None,
                  rtol: float | None = DEFAULT_RTOL, explain: bool = False) -> float:
-    scene, table = load_scene(scene_path, overrides)
+    scene, table = read_scene(scene_path, overrides)
     if explain:
-        print(compile_scene(scene, rtol=rtol if rtol is not None else DEFAULT_RTOL, seed=seed).explain())
-    obs = observe(scene, seed, rtol)
+        with scene_errors():
+            logger.info(compile_scene(scene, rtol=rtol if rtol is not None else DEFAULT_RTOL, seed=seed).explain())
+    obs = api.simulate(table, seed=seed, rtol=rtol)
     writers = {out: lambda p: write_series_csv(p, obs, table, seed, __version__)}
     if plot is not None:
         writers[plot] = lambda p: plot_series(p, obs, str(table.get("title") or scene_path.stem))
@@ -54,11 +52,11 @@ def _simulate_to(scene_path: Path, overrides: list[str], seed: int | None, out: 
 
 
 def cmd_simulate(args: argparse.Namespace) -> None:
-    if not (args.rtol > 0 and np.isfinite(args.rtol)):
-        raise SceneError(f"--rtol: {args.rtol:g} is outside the allowed range (0, inf)")
+    if not (0 < args.rtol < float("inf")):
+        raise InputError(f"--rtol: {args.rtol:g} is outside the allowed range (0, inf)")
     s = _simulate_to(Path(args.scene), args.set or [], args.seed, Path(args.output),
                      Path(args.plot) if args.plot else None, None if args.dense else args.rtol, args.explain)
-    print(f"sensitivity S = {s:.4e} (eq. 21); wrote {args.output}" + (f" and {args.plot}" if args.plot else ""))
+    logger.info(f"sensitivity S = {s:.4e} (eq. 21); wrote {args.output}" + (f" and {args.plot}" if args.plot else ""))
 
 
 DEMO_STEPS = 7000  # the demo converges near 1500 steps (50 x tau, tau ~ 30); the cap keeps it < 3 min
@@ -67,36 +65,27 @@ DEMO_STEPS = 7000  # the demo converges near 1500 steps (50 x tau, tau ~ 30); th
 def cmd_demo(args: argparse.Namespace) -> None:
     """Simulate the paper's sec. 4.2 roof (SNR ~10 at the drive line), fit it (spectral -> MAP ->
     emcee) and write the report: the main job on built-in defaults."""
-    import json
-
-    from vibinverse.data import load_series
-    from vibinverse.fit import default_free, run_fit
-    from vibinverse.problem import Problem
     from vibinverse.report import write_report
-    from vibinverse.result import write_netcdf
 
     out = _output_dir(args.output)
     scene = builtin_scene(DEMO_SCENE)
     csv, png = out / "frame.csv", out / "frame.png"
     s = _simulate_to(scene, list(DEMO_SET), args.seed, csv, png)
-    print(f"demo: paper sec. 4.2 roof on a resonant frame, 20 s at 200 Hz, sensitivity S = {s:.3e}; wrote {csv}")
-    series = load_series(csv)
-    _, table = load_scene(scene, list(DEMO_SET))
-    problem = Problem(table, series, default_free("surfaces.roof.motion.", table, series))
-    summary, extras = run_fit(problem, "auto", seed=args.seed, backend=out / "result.chain.h5",
-                              max_steps=DEMO_STEPS, progress=not args.no_progress)
-    chains, log_prob = extras.pop("_chains", None), extras.pop("_log_prob", None)
-    write_all({out / "result.nc": lambda p: write_netcdf(p, summary, series, chains, log_prob, extras),
+    logger.info(f"demo: paper sec. 4.2 roof on a resonant frame, 20 s at 200 Hz, sensitivity S = {s:.3e}; wrote {csv}")
+    result = api.fit(csv, scene, overrides=DEMO_SET, method="auto", seed=args.seed, chain=out / "result.chain.h5",
+                     max_steps=DEMO_STEPS, progress=not args.no_progress)
+    summary = result.summary()
+    write_all({out / "result.nc": result.to_netcdf,
                out / "result.json": lambda p: p.write_text(json.dumps(summary, indent=2))})
     report = write_report(out / "result.nc", out)
-    print("parameter                                     median      90% interval              truth")
+    logger.info("parameter                                     median      90% interval              truth")
     for name, v in summary["parameters"].items():
-        print(f"  {name:<42} {v['median']:<11.5g} [{v['q05']:.5g}, {v['q95']:.5g}]  {v['truth']:.5g}")
+        logger.info(f"  {name:<42} {v['median']:<11.5g} [{v['q05']:.5g}, {v['q95']:.5g}]  {v['truth']:.5g}")
     d = summary["diagnostics"]
-    print(f"MCMC: {d['n_steps']} steps, R-hat {d['rhat_max']:.3f}, ESS {d['ess_min']:.0f}, "
+    logger.info(f"MCMC: {d['n_steps']} steps, R-hat {d['rhat_max']:.3f}, ESS {d['ess_min']:.0f}, "
           f"{'converged' if d['converged'] else 'NOT converged (the report says what to do)'}; "
           + ", ".join(f"{k} {v:.1f} s" for k, v in summary["timing"].items()))
-    print(f"report: {report}")
+    logger.info(f"report: {report}")
 
 
 def cmd_study(args: argparse.Namespace) -> None:
@@ -105,49 +94,35 @@ def cmd_study(args: argparse.Namespace) -> None:
     out = _output_dir(args.output)
     names = list(STUDIES) if args.name == "all" else [args.name]
     for name in names:
-        print(STUDIES[name][0](out))
+        logger.info(STUDIES[name][0](out))
 
 
 def cmd_fit(args: argparse.Namespace) -> None:
-    from vibinverse.data import load_series
-    from vibinverse.estimators.mcmc import Interrupted
-    from vibinverse.fit import detections, free_defaults, run_fit
-    from vibinverse.params import parse_free
-    from vibinverse.problem import Problem, likelihood_for
-    from vibinverse.result import write_netcdf
+    from vibinverse.priors import parse_free
 
     if args.workers < 1 or args.max_steps < 1:
-        raise SceneError("--workers and --max-steps: must be >= 1")
+        raise InputError("--workers and --max-steps: must be >= 1")
     out, summary_path = Path(args.output), Path(args.summary)
     for p in (out, summary_path):
         if not p.parent.is_dir():
-            raise SceneError(f"output: cannot write {p}: no such directory")
-    series = load_series(args.data)
-    _, table = load_scene(Path(args.scene), args.set or [])
+            raise InputError(f"output: cannot write {p}: no such directory")
+    series = api.load_series(args.data)
+    table = api.load_scene(args.scene, args.set or [])
     free = parse_free(args.free or [], table.get("infer"))
-    like = likelihood_for(table, series)
-    problem = Problem(table, series, free or free_defaults(table, series, like), like=like)
-    print(f"data: {series.describe()}")
+    logger.info(f"data: {series.describe()}")
     chain = Path(args.chain) if args.chain else out.with_suffix(".chain.h5")
-    try:
-        summary, extras = run_fit(problem, args.method, seed=args.seed, backend=chain, resume=args.resume,
-                                  workers=args.workers, max_steps=args.max_steps, progress=not args.no_progress)
-    except Interrupted as exc:
-        raise SceneError(str(exc)) from None
-    chains, log_prob = extras.pop("_chains", None), extras.pop("_log_prob", None)
-    import json
-
-    write_all({out: lambda p: write_netcdf(p, summary, series, chains, log_prob, extras),
-               summary_path: lambda p: p.write_text(json.dumps(summary, indent=2))})
+    result = api.fit(series, table, method=args.method, free=free or None, seed=args.seed, chain=chain,
+                     resume=args.resume, workers=args.workers, max_steps=args.max_steps, progress=not args.no_progress)
+    summary = result.summary()
+    write_all({out: result.to_netcdf, summary_path: lambda p: p.write_text(json.dumps(summary, indent=2))})
     for name, v in summary["parameters"].items():
         interval = "" if v["q05"] is None else f"  90% [{v['q05']:.6g}, {v['q95']:.6g}]"
         truth = "" if v["truth"] is None else f"  truth {v['truth']:.6g}"
-        print(f"  {name:<44} {v['median']:.6g}{interval}{truth}")
-    d = summary["diagnostics"]
-    for what, gain, threshold, detected in detections(d):
-        if not detected:
-            print(f"  no {what} detected (log-likelihood gain {gain:.1f} < {threshold:.1f})")
-    print(f"wrote {out} and {summary_path}")
+        logger.info(f"  {name:<44} {v['median']:.6g}{interval}{truth}")
+    for d in result.detections:
+        if not d.detected:
+            logger.info(f"  no {d.what} detected (log-likelihood gain {d.delta_loglike:.1f} < {d.threshold:.1f})")
+    logger.info(f"wrote {out} and {summary_path}")
 
 
 def cmd_report(args: argparse.Namespace) -> None:
@@ -155,28 +130,26 @@ def cmd_report(args: argparse.Namespace) -> None:
 
     out = _output_dir(args.output)
     path = write_report(Path(args.result), out)
-    print(f"wrote {path}")
+    logger.info(f"wrote {path}")
 
 
 def cmd_design(args: argparse.Namespace) -> None:
-    from vibinverse.design.sweep import run_design, score, write_design
+    from vibinverse.design.ranking import score
+    from vibinverse.design.sweep import write_design
 
-    if args.workers < 1:
-        raise SceneError(f"--workers: {args.workers}; allowed range [1, inf)")
-    _, table = load_scene(Path(args.scene), args.set or [])
-    result = run_design(table, args.vary or [], args.target, args.threshold, args.workers,
-                        progress=not args.no_progress)
+    result = api.design(args.scene, vary=args.vary or [], targets=args.target, threshold=args.threshold,
+                        workers=args.workers, overrides=args.set or [], progress=not args.no_progress)
     out = _output_dir(args.output)
     write_design(result, out)
     rows = result["rows"]
     n_ok = sum(r["status"] == "ok" for r in rows)
-    print(f"{len(rows)} configurations in {result['seconds']:.1f} s ({n_ok} possible, "
+    logger.info(f"{len(rows)} configurations in {result['seconds']:.1f} s ({n_ok} possible, "
           f"{sum(r['status'] == 'ok' and r['sensitivity'] >= result['threshold'] for r in rows)} detectable "
           f"at S >= {result['threshold']:g})")
     for i, r in enumerate(result["best"][:5], 1):
         where = ", ".join(f"{a.key}={_short(r[a.key])}" for a in result["axes"])
-        print(f"  {i}. {where}: S = {r['sensitivity']:.3g}, worst relative CRB sd = {score(r, result['targets']):.3g}")
-    print(f"wrote {out / 'design.csv'}, {out / 'design.json'} and maps in {out}")
+        logger.info(f"  {i}. {where}: S = {r['sensitivity']:.3g}, worst relative CRB sd = {score(r, result['targets']):.3g}")
+    logger.info(f"wrote {out / 'design.csv'}, {out / 'design.json'} and maps in {out}")
 
 
 def _short(v: object) -> str:
@@ -184,21 +157,19 @@ def _short(v: object) -> str:
 
 
 def cmd_bench(args: argparse.Namespace) -> None:
-    import json
-
     targets = [Path(p) for p in (args.json, args.plot) if p]
     for p in targets:  # fail before the long run, not after it
         if not p.parent.is_dir():
-            raise SceneError(f"output: cannot write {p}: no such directory")
+            raise InputError(f"output: cannot write {p}: no such directory")
     if args.estimators:
         from vibinverse.bench.estimators_bench import plot_speed_error, run as run_estimators
 
         sizes = {"n_seeds": 5, "n_coverage": 20, "mcmc_seeds": 4} if args.quick else {}
         result = run_estimators(builtin_scene(""), **sizes)
         for scene in dict.fromkeys(r["scene"] for r in result["rows"]):
-            print(f"{scene}:")
-            print(_estimator_table([r for r in result["rows"] if r["scene"] == scene]))
-        print(f"estimator comparison: {result['seconds']:.0f} s")
+            logger.info(f"{scene}:")
+            logger.info(_estimator_table([r for r in result["rows"] if r["scene"] == scene]))
+        logger.info(f"estimator comparison: {result['seconds']:.0f} s")
         rows = result["rows"]
     else:
         from vibinverse.bench.forward_bench import plot_speed_error, run
@@ -228,9 +199,13 @@ def _estimator_table(rows: list[dict]) -> str:
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="vibinverse", description="Passive optical vibrometry: simulate and invert pixel intensity series.")
     p.add_argument("--version", action="version", version=f"vibinverse {__version__}")
+    verbosity = argparse.ArgumentParser(add_help=False)
+    loud = verbosity.add_mutually_exclusive_group()
+    loud.add_argument("-q", "--quiet", action="store_true", help="print errors and warnings only")
+    loud.add_argument("-v", "--verbose", action="store_true", help="also print the stages' details (debug log)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
-    sim = sub.add_parser("simulate", help="scene file -> pixel intensity series (CSV) and its sensitivity")
+    sim = sub.add_parser("simulate", parents=[verbosity], help="scene file -> pixel intensity series (CSV) and its sensitivity")
     sim.add_argument("scene", help="scene file (TOML)")
     sim.add_argument("--set", action="append", metavar="dotted.key=value",
                      help="override a scene value, e.g. --set sensor.inclination='pi/3+0.02' (repeatable)")
@@ -245,13 +220,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     from vibinverse.studies import STUDIES
 
-    study = sub.add_parser("study", help="reproduce a figure of the paper",
+    study = sub.add_parser("study", parents=[verbosity], help="reproduce a figure of the paper",
                            description="Studies: " + "; ".join(f"{k}: {v[1]}" for k, v in STUDIES.items()))
     study.add_argument("name", choices=[*STUDIES, "all"], help="figure to reproduce, or all")
     study.add_argument("-o", "--output", default="studies", help="output directory (default: studies)")
     study.set_defaults(func=cmd_study)
 
-    fit = sub.add_parser("fit", help="measured series + scene -> posterior of resonances, drives, vibration "
+    fit = sub.add_parser("fit", parents=[verbosity], help="measured series + scene -> posterior of resonances, drives, vibration "
                          "lines and noise (a frame scene: Kalman likelihood; plate or ground: white noise)")
     fit.add_argument("data", help="series: CSV (time,intensity), .npy, .npz or netCDF; NaN = gap")
     fit.add_argument("--scene", required=True, help="scene file describing the observation (TOML)")
@@ -271,12 +246,12 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--summary", required=True, help="result summary JSON")
     fit.set_defaults(func=cmd_fit)
 
-    report = sub.add_parser("report", help="result netCDF -> self-contained HTML report")
+    report = sub.add_parser("report", parents=[verbosity], help="result netCDF -> self-contained HTML report")
     report.add_argument("result")
     report.add_argument("-o", "--output", default="report", help="output directory")
     report.set_defaults(func=cmd_report)
 
-    design = sub.add_parser("design", help="where, when and how to look: sensitivity, line SNR and "
+    design = sub.add_parser("design", parents=[verbosity], help="where, when and how to look: sensitivity, line SNR and "
                             "Cramer-Rao bounds over a sweep of observation choices")
     design.add_argument("scene", help="scene file (TOML)")
     design.add_argument("--vary", action="append", metavar="KEY=start:stop:num|KEY=a,b,c",
@@ -290,7 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
     design.add_argument("-o", "--output", default="design", help="output directory (default: design)")
     design.set_defaults(func=cmd_design)
 
-    bench = sub.add_parser("bench", help="speed against error of the forward model (reference vs fast paths)")
+    bench = sub.add_parser("bench", parents=[verbosity], help="speed against error of the forward model (reference vs fast paths)")
     bench.add_argument("--quick", action="store_true", help="128x128 instead of 256x256 subpixels (a few minutes)")
     bench.add_argument("--json", help="write the results as JSON")
     bench.add_argument("--plot", help="write the speed-against-error plot (PNG)")
@@ -299,29 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "SNR 3/10/30; ~15 min, --quick ~3 min)")
     bench.set_defaults(func=cmd_bench)
 
-    demo = sub.add_parser("demo", help="run the main job on a built-in scene")
+    demo = sub.add_parser("demo", parents=[verbosity], help="run the main job on a built-in scene")
     demo.add_argument("-o", "--output", default="vibinverse-demo", help="output directory (default: vibinverse-demo)")
     demo.add_argument("--seed", type=int, default=0)
     demo.add_argument("--no-progress", action="store_true")
     demo.set_defaults(func=cmd_demo)
     return p
-
-
-def main(argv: list[str] | None = None) -> int:
-    try:
-        args = build_parser().parse_args(argv)
-        args.func(args)
-    except SceneError as exc:
-        print(f"vibinverse: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("vibinverse: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # output piped into a reader that stopped (e.g. head)
-        sys.stderr.close()
-        return 0
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

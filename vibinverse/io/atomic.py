@@ -8,14 +8,14 @@ import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from forward.errors import SceneError
+from vibinverse.errors import InputError
 
 
 @contextlib.contextmanager
 def staged(paths: list[Path]) -> Iterator[list[Path]]:
     """Yield temporary paths beside `paths`; on success move them all into place, else delete them.
 
-    Raises SceneError (one line) when a destination's directory is missing or not writable.
+    Raises InputError (one line) when a destination's directory is missing or not writable.
     """
     temps: list[Path] = []
     try:
@@ -23,7 +23,7 @@ def staged(paths: list[Path]) -> Iterator[list[Path]]:
             try:
                 fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
             except OSError as exc:
-                raise SceneError(f"output: cannot write {p}: {exc.strerror or exc}") from None
+                raise InputError(f"output: cannot write {p}: {exc.strerror or exc}") from None
             os.close(fd)
             os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results should be readable like any file
             temps.append(Path(tmp))

@@ -1,11 +1,18 @@
-"""Maximum a posteriori with restarts, and the Laplace covariance from the Hessian at the optimum."""
+"""Derivative-free maximum a posteriori (Nelder-Mead -> BFGS) with restarts, and the Laplace
+covariance from a finite-difference Hessian at the optimum: the fallback of the casadi MAP, for
+any model."""
 
 from __future__ import annotations
+
+import warnings
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
 
-from vibinverse.problem import Problem
+from vibinverse.estimators.base import Estimator, base_result, register_estimator
+from vibinverse.posterior import Posterior
+from vibinverse.result import FitResult
 
 
 def hessian(f, z: np.ndarray, steps: np.ndarray) -> np.ndarray:
@@ -24,7 +31,7 @@ def hessian(f, z: np.ndarray, steps: np.ndarray) -> np.ndarray:
     return h
 
 
-def map_fit(problem: Problem, start: dict[str, float], restarts: int = 2, seed: int = 0) -> dict:
+def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed: int = 0) -> dict:
     """MAP in the unconstrained space from `start` and jittered restarts; Laplace covariance.
 
     Returns {"z", "values", "cov_z", "sd", "log_post", "n_evals", "hessian_ok"}; sd is in value units
@@ -60,3 +67,38 @@ def map_fit(problem: Problem, start: dict[str, float], restarts: int = 2, seed: 
     sd = np.sqrt(np.diag(cov)) * jac
     return {"z": z, "values": problem.values(z), "cov_z": cov, "sd": dict(zip(problem.space.names, sd)),
             "log_post": -best.fun, "n_evals": evals, "hessian_ok": ok}
+
+
+def laplace_draws(problem: Posterior, z: np.ndarray, cov_z: np.ndarray, seed: int, n: int = 2000) -> np.ndarray:
+    """Draws (n, parameter) of the Laplace approximation N(z, cov_z), mapped to value units."""
+    rng = np.random.default_rng(seed)
+    zs = rng.multivariate_normal(z, cov_z, size=n, method="eigh")
+    return np.array([list(problem.values(zi).values()) for zi in zs])
+
+
+def map_result(problem: Posterior, method: str, fit: dict, seed: int) -> FitResult:
+    """A FitResult of a MAP fit (`map_fit` or the casadi MAP's return) with its Laplace draws."""
+    return base_result(problem, method, fit["values"], sd=fit["sd"], z=fit["z"], cov_z=fit["cov_z"],
+                       log_post=fit["log_post"], approximate_draws=laplace_draws(problem, fit["z"], fit["cov_z"], seed),
+                       diagnostics={"converged": bool(np.isfinite(fit["log_post"])), "log_posterior": fit["log_post"],
+                                    "hessian_positive_definite": fit.get("hessian_ok", True)})
+
+
+@register_estimator
+class ScipyMap(Estimator):
+    """MAP from every start of the stage before (best of them), Laplace covariance."""
+
+    name = "map"
+
+    def estimate(self, posterior: Posterior, start: FitResult | None, *, seed: int = 0, **options: Any) -> FitResult:
+        starts = start.starts or [start.point] if start is not None else _spectral_starts(posterior)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            fits = [map_fit(posterior, st, restarts=1, seed=seed) for st in starts]
+        return map_result(posterior, self.name, max(fits, key=lambda f: f["log_post"]), seed)
+
+
+def _spectral_starts(posterior: Posterior) -> list[dict[str, float]]:
+    from vibinverse.estimators.spectral import ranked_starts
+
+    return ranked_starts(posterior)

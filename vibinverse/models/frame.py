@@ -15,24 +15,27 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from forward.errors import SceneError
-from forward.motion.frame import FrameParameters, _mode_zoh, linearize
+from forward.errors import SceneError as ForwardSceneError
+from forward.motion.frame import FrameParameters, linearize, mode_zoh
 from forward.reduce import rigid_observation
-from forward.scene_file import scene_from_table
-from vibinverse.data import Series, with_sampling
+from vibinverse.errors import SceneError, Unsupported
+from vibinverse.fisher import frame_fisher
+from vibinverse.io.scenes import scene_of
+from vibinverse.io.series import Series, with_sampling
+from vibinverse.models.base import LineTest, SignalModel, register_model
+from vibinverse.models.frame_spectral import frame_guess, frame_guesses
 from vibinverse.kalman import log_likelihood, njit
+from vibinverse.priors import Prior
 from vibinverse.scene_keys import get_value, numeric_keys, set_value
 
+if TYPE_CHECKING:
+    from vibinverse.posterior import Posterior
+
 TILT_MODES = (3, 4)  # generalized coordinates rx, ry
-
-
-def is_frame(table: dict) -> bool:
-    """Whether a surface of the scene moves as a frame (noise-driven: the state-space likelihood)."""
-    return any((s.get("motion") or {}).get("kind") == "frame" for s in (table.get("surfaces") or {}).values())
 
 
 def frame_surface(table: dict) -> str:
@@ -50,7 +53,7 @@ def modal_table(table: dict) -> dict:
     name = frame_surface(out)
     motion = out["surfaces"][name]["motion"]
     if "k_vertical" in motion:
-        scene = scene_from_table(table)
+        scene = scene_of(table)
         params = next(s for s in scene.surfaces if s.name == name).motion.params
         modal = params.modal()
         for k in ("k_vertical", "b_vertical", "k_lateral", "b_lateral"):
@@ -70,10 +73,31 @@ class Components:
     p0: np.ndarray
 
 
-class FrameLikelihood:
-    """log p(data | parameters) for a frame scene; parameters by dotted name over a base table."""
+@register_model
+class FrameModel(SignalModel):
+    """A roof on a resonant frame (sec. 4.2): drive lines give a deterministic mean, white base
+    noise a random tilt; the exact likelihood is a Kalman filter on the tilt modes."""
 
-    kind = "frame"
+    name = "frame"
+    map_start_margin = 50.0  # a swapped drive/resonance assignment starts far below the best
+
+    @classmethod
+    def describes(cls, table: dict) -> bool:
+        """A surface of the scene moves as a frame (noise-driven: the state-space likelihood)."""
+        return any((s.get("motion") or {}).get("kind") == "frame" for s in (table.get("surfaces") or {}).values())
+
+    @classmethod
+    def truth_table(cls, table: dict) -> dict:
+        return modal_table(table)
+
+    @classmethod
+    def default_targets(cls, table: dict) -> list[str]:
+        """Tilt resonance and damping ratio, and the first drive line's frequency and amplitude."""
+        k = f"surfaces.{frame_surface(table)}.motion."
+        out = [k + "tilt_frequency", k + "tilt_damping_ratio"]
+        if table["surfaces"][frame_surface(table)]["motion"].get("drive_frequency") or []:
+            out += [k + "drive_frequency", k + "drive_amplitude"]
+        return out
 
     def __init__(self, table: dict, series: Series):
         if not series.uniform:
@@ -88,7 +112,7 @@ class FrameLikelihood:
         self.t = series.time
         self.dt = series.dt
         self.key = f"surfaces.{self.roof}.motion."
-        scene = scene_from_table(with_sampling(self.base, series))
+        scene = scene_of(with_sampling(self.base, series))
         self.roof_surface = next(s for s in scene.surfaces if s.name == self.roof)
         self.x0, self.jac, self.hess = rigid_observation(scene, self.roof)
         m = self.base["surfaces"][self.roof]["motion"]
@@ -105,7 +129,7 @@ class FrameLikelihood:
             raise RuntimeError("frame likelihood: the tilt rows are not linear in (k1, b1)")
         self._fixed: dict[str, float] = {}  # scene values read once (a likelihood call is a hot path)
         self._geometry = self._geometry_names()
-        self._n_lines = len(m.get("drive_frequency", []) or [])
+        self.n_lines = len(m.get("drive_frequency", []) or [])
         plane = np.array(m.get("drive_plane", [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), dtype=float)
         d1, d2 = plane[0] / np.linalg.norm(plane[0]), plane[1] / np.linalg.norm(plane[1])
         corner = slice(3 * int(m.get("drive_corner", 0)), 3 * int(m.get("drive_corner", 0)) + 3)
@@ -120,12 +144,12 @@ class FrameLikelihood:
     def components(self, values: dict[str, float]) -> Components:
         """Mean signal and state-space matrices at the given parameter values (others from the base)."""
         val = lambda name, default=None: values.get(self.key + name, default if default is not None else
-                                                     self._base_value(self.key + name))
+                                                     self.base_value(self.key + name))
         m = self.base["surfaces"][self.roof]["motion"]
         tilt = self._tilt_rows(val("tilt_frequency"), val("tilt_damping_ratio"))
         x0, jac, hs = self.observation(values)
-        if self._n_lines:
-            f, a, ph = (np.array([self._line(values, name, i) for i in range(self._n_lines)])
+        if self.n_lines:
+            f, a, ph = (np.array([self.line_value(values, name, i) for i in range(self.n_lines)])
                         for name in ("drive_frequency", "drive_amplitude", "drive_phase"))
             w = 2 * np.pi * f
             qx, qy = self._tilt_phasors(tilt, w, a * np.exp(1j * ph))
@@ -140,12 +164,12 @@ class FrameLikelihood:
         phi, q, p0, h = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)), np.zeros(n)
         for b, i in enumerate(seen):
             sl = slice(2 * b, 2 * b + 2)
-            phi_i, gam = _mode_zoh(tilt["stiffness"][i], tilt["damping"][i], tilt["mass"][i], self.dt)
+            phi_i, gam = mode_zoh(tilt["stiffness"][i], tilt["damping"][i], tilt["mass"][i], self.dt)
             q_i = rms**2 * (tilt["force_spring"][i] @ tilt["force_spring"][i]) * np.outer(gam, gam)
             phi[sl, sl], q[sl, sl] = phi_i, q_i
             p0[sl, sl] = _stationary_2x2(phi_i, q_i)
             h[2 * b] = gains[i]
-        sigma = values.get("noise.sigma", self._base_value("noise.sigma") if "noise" in self.base else 0.0)
+        sigma = values.get("noise.sigma", self.base_value("noise.sigma") if "noise" in self.base else 0.0)
         return Components(mean, phi, q, h, float(sigma) ** 2, p0)
 
     def _geometry_names(self) -> set[str]:
@@ -166,7 +190,7 @@ class FrameLikelihood:
             table = copy.deepcopy(self.base)
             for n, v in geo:
                 set_value(table, n, v)
-            scene = scene_from_table(with_sampling(table, self.series))
+            scene = scene_of(with_sampling(table, self.series))
             self._observed = (geo, rigid_observation(scene, self.roof))
         return self._observed[1]
 
@@ -221,17 +245,18 @@ class FrameLikelihood:
             names |= {f"{k}{n}[{i}]" for i in range(lines)} | ({k + n} if lines else set())
         return names
 
-    def _line(self, values: dict[str, float], name: str, i: int) -> float:
+    def line_value(self, values: dict[str, float], name: str, i: int) -> float:
         """Drive line i's value: "name[i]" (or plain "name" for line 0) from `values`, else the base."""
         for k in (f"{self.key}{name}[{i}]", *((f"{self.key}{name}",) if i == 0 else ())):
             if k in values:
                 return values[k]
         try:
-            return self._base_value(f"{self.key}{name}[{i}]")
-        except SceneError:
+            return self.base_value(f"{self.key}{name}[{i}]")
+        except ForwardSceneError:
             return 0.0  # an absent drive_phase
 
-    def _base_value(self, key: str) -> float:
+    def base_value(self, key: str) -> float:
+        """A scene value by dotted name (read once: a likelihood call is a hot path)."""
         if key not in self._fixed:
             self._fixed[key] = get_value(self.base, key)
         return self._fixed[key]
@@ -243,6 +268,77 @@ class FrameLikelihood:
     def log_likelihood(self, values: dict[str, float]) -> float:
         c = self.components(values)
         return log_likelihood(self.series.intensity - c.mean, c.phi, c.q, c.h, c.r, c.p0)
+
+    # ------------------------------------------------------------------ what the estimators need
+    def default_priors(self) -> dict[str, Prior]:
+        """Tilt resonance and damping, the drive line's frequency, amplitude and phase, both noise
+        levels. Frequencies from 3 cycles in the record to Nyquist."""
+        nyq = 0.5 * self.series.fs
+        lo = max(0.2, 3.0 / (self.t[-1] - self.t[0]))  # at least 3 cycles in the record
+        k = self.key
+        return {
+            k + "tilt_frequency": Prior("uniform", (lo, nyq)),
+            k + "tilt_damping_ratio": Prior("loguniform", (1e-3, 0.5)),
+            k + "drive_frequency": Prior("uniform", (lo, nyq)),
+            # uniform, not log-uniform: a log-uniform prior puts half its mass on amplitudes too small
+            # to see, where the drive frequency is free, and walkers drift onto that plateau
+            k + "drive_amplitude": Prior("uniform", (0.0, 0.05)),
+            k + "drive_phase": Prior("uniform", (-np.pi, np.pi)),
+            k + "noise_rms": Prior("loguniform", (1e-7, 1e-1)),
+            "noise.sigma": Prior("loguniform", (1e-8, 1e3)),
+        }
+
+    def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
+        """One start per plausible drive line, most steady first (`frame_spectral.frame_guesses`)."""
+        return frame_guesses(self.series, self, bounds)
+
+    def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
+        """The drive line (its amplitude to 0) and the tilt resonance (the base noise to 0)."""
+        k = self.key
+        out = []
+        for label, name, freq in (("drive", "drive_amplitude", "drive_frequency"),
+                                  ("resonance", "noise_rms", "tilt_frequency")):
+            if k + name in values:
+                out.append(LineTest(label, {k + name: 0.0}, k + freq))
+        return out
+
+    def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
+        """Mean term through the Kalman filter plus Whittle's covariance term (`vibinverse.fisher`)."""
+        return frame_fisher(self, values, names)
+
+    def casadi_objective(self, posterior: Posterior) -> Any:
+        """`frame_casadi.CasadiFrameObjective`; Unsupported when a geometry value is free (the
+        casadi form holds the observation fixed)."""
+        geometry = self.geometry_free(posterior.space.names)
+        if geometry:
+            raise Unsupported(f"the casadi MAP holds the observation fixed; {', '.join(geometry)} re-form it")
+        from vibinverse.models.frame_casadi import CasadiFrameObjective
+
+        return CasadiFrameObjective(posterior)
+
+    def calibrated_guess(self, drive_frequency: float | None, resonance: tuple[float, float]) -> dict[str, float]:
+        """Spectral values of the drive and noise levels given the resonance (frequency, damping
+        ratio), calibrated through the forward model (`frame_spectral.frame_guess`)."""
+        bounds = {self.key + "tilt_frequency": (resonance[0], resonance[0])}
+        return frame_guess(self.series, self, bounds, drive_frequency, resonance=resonance)
+
+    def drive_frequencies(self, values: dict[str, float]) -> list[float]:
+        """Every drive line's frequency at `values` (others from the scene)."""
+        return [self.line_value(values, "drive_frequency", i) for i in range(self.n_lines)]
+
+    def resonance_values(self) -> dict[str, float]:
+        """Scene values of the resonance, base noise, sensor noise and first drive frequency (what
+        an identification of the tilt mode reads besides the free parameters)."""
+        out = {}
+        k = self.key
+        for n in (k + "tilt_frequency", k + "tilt_damping_ratio", k + "noise_rms", "noise.sigma"):
+            try:
+                out[n] = self.base_value(n)
+            except ForwardSceneError:
+                pass
+        if self.n_lines:
+            out[k + "drive_frequency"] = self.line_value({}, "drive_frequency", 0)
+        return out
 
 
 _ANCHOR = 64  # samples between exact re-anchors of the rotation recurrence

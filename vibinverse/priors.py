@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from forward.errors import SceneError
 from forward.validation import expression
+from vibinverse.errors import SceneError, scene_errors
 
 _PRIOR = re.compile(r"^\s*(uniform|loguniform|normal|truncnormal)\s*\((.*)\)\s*$")
 _NARGS = {"uniform": 2, "loguniform": 2, "normal": 2, "truncnormal": 4}
@@ -75,6 +75,22 @@ class Prior:
             return log_u + log_1mu + math.log(hi - lo)
         return 0.0
 
+    def centre(self) -> float:
+        """A central value: the geometric mean of a log-uniform range, the midpoint of a bounded one,
+        else the mean of the normal."""
+        lo, hi = self.bounds
+        if self.kind == "loguniform":
+            return float(math.sqrt(lo * hi))
+        if math.isfinite(lo) and math.isfinite(hi):
+            return 0.5 * (lo + hi)
+        return float(self.args[0])
+
+    def inside(self, v: float) -> float:
+        """v moved just inside the prior's support (a start for an optimizer); the centre when v is not finite."""
+        lo, hi = self.bounds
+        span = hi - lo if math.isfinite(hi - lo) else 1.0
+        return float(np.clip(v, lo + 1e-6 * span, hi - 1e-6 * span)) if np.isfinite(v) else self.centre()
+
     def __str__(self) -> str:
         return f"{self.kind}({', '.join(f'{a:g}' for a in self.args)})"
 
@@ -86,7 +102,8 @@ def parse_prior(text: str, key: str) -> Prior:
         raise SceneError(f"{key}: prior {text!r} is not one of uniform(a,b), loguniform(a,b), normal(mu,sd), "
                          "truncnormal(mu,sd,a,b)")
     kind = m.group(1)
-    args = tuple(expression(a, key) for a in m.group(2).split(",")) if m.group(2).strip() else ()
+    with scene_errors():
+        args = tuple(expression(a, key) for a in m.group(2).split(",")) if m.group(2).strip() else ()
     if len(args) != _NARGS[kind]:
         raise SceneError(f"{key}: {kind} takes {_NARGS[kind]} arguments, got {len(args)}")
     if kind in ("uniform", "loguniform", "truncnormal") and not args[-2] < args[-1]:
@@ -137,3 +154,31 @@ class ParameterSpace:
         for p, v in zip(self.priors, z):
             total += p.log_pdf(p.from_unbounded(float(v))) + p.log_jacobian(float(v))
         return total
+
+
+def casadi_value(p: Prior, z):
+    """`Prior.from_unbounded` as a casadi expression of z."""
+    import casadi as ca
+
+    lo, hi = p.bounds
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return z
+    u = 1.0 / (1.0 + ca.exp(-z))
+    if p.kind == "loguniform":
+        return ca.exp(math.log(lo) + u * (math.log(hi) - math.log(lo)))
+    return lo + u * (hi - lo)
+
+
+def casadi_log_prior(p: Prior, z, v):
+    """log prior density of v plus log |dv/dz| as a casadi expression (`Prior.log_pdf` +
+    `Prior.log_jacobian`)."""
+    import casadi as ca
+
+    lo, hi = p.bounds
+    bounded = math.isfinite(lo) and math.isfinite(hi)
+    logistic = (-ca.log1p(ca.exp(-z)) - ca.log1p(ca.exp(z))) if bounded else 0.0
+    if p.kind in ("uniform", "loguniform"):
+        return logistic  # the density and the Jacobian's range factor cancel
+    mu, sd = p.args[:2]
+    dens = -0.5 * ((v - mu) / sd) ** 2 - math.log(sd * math.sqrt(2 * math.pi))
+    return dens + (logistic + math.log(hi - lo) if bounded else 0.0)

@@ -1,14 +1,14 @@
 """The posterior of a deterministic scene (plate roof, ground waves) as a casadi expression, for the
-casadi MAP (`casadi_map.casadi_map`): exact gradients and Hessian through the reduced model.
+casadi MAP (`vibinverse.estimators.casadi_map`): exact gradients and Hessian through the reduced model.
 
 Every modal motion here is a sum of lines whose modal coordinates are
     q_j(t) = sum_l A_l (alpha_jl cos(w_l t + phase_l) + beta_jl sin(w_l t + phase_l)),
 with shapes that do not depend on A, w or the phase. (alpha, beta) are read off the motion's own
 `coefficients` at construction, and the form is verified there at a second amplitude, frequency
 and phase. A parameter that breaks it (a Rayleigh frequency changes the wave's shape; a plate driven
-through its boundary, eq. (10), has q ~ w^2) raises `Unsupported`, and the fit uses the scipy MAP.
+through its boundary, eq. (10), has q ~ w^2) raises `vibinverse.errors.Unsupported`, and the fit uses the scipy MAP.
 The mean is then the Taylor model of `forward.reduce` (eq. (23) to second order, summed over the
-footprint), X = irradiance (rest + sum_k w_k (J_k q + q'H_k q / 2)), exactly as `ResponseLikelihood`
+footprint), X = irradiance (rest + sum_k w_k (J_k q + q'H_k q / 2)), exactly as `DeterministicModel`
 forms it (a test checks the two posteriors agree to 1e-9).
 """
 
@@ -20,28 +20,25 @@ import casadi as ca
 import numpy as np
 
 from forward.reduce import modal_points, taylor_coefficients
-from vibinverse.estimators.casadi_map import _log_prior, _logistic_value
-from vibinverse.problem import Problem
-from vibinverse.response_model import Line, ResponseLikelihood
-
-
-class Unsupported(Exception):
-    """The free parameters leave the form the casadi objective is written in."""
+from vibinverse.errors import Unsupported
+from vibinverse.models.deterministic import DeterministicModel, Line
+from vibinverse.posterior import Posterior
+from vibinverse.priors import casadi_log_prior, casadi_value
 
 
 class CasadiResponseObjective:
-    """-log posterior of a deterministic-scene Problem as a casadi Function of z, y, mask."""
+    """-log posterior of a deterministic-scene Posterior as a casadi Function of z, y, mask."""
 
-    def __init__(self, problem: Problem):
-        like: ResponseLikelihood = problem.like
+    def __init__(self, problem: Posterior):
+        like: DeterministicModel = problem.model
         self.problem, self.like = problem, like
-        if like.model != "taylor2":
+        if like.reduction != "taylor2":
             raise Unsupported("the mean needs the compiled (Chebyshev) model")
         noise = like.scene.noise
         if noise.adc_bits > 0:
             raise Unsupported("ADC quantization noise")
         for n in problem.space.names:
-            if like._kinds.get(n) == "scene":
+            if like.kinds.get(n) == "scene":
                 raise Unsupported(f"{n} re-forms the scene")
         self.lines = like.lines()
         self.surfaces = self._surfaces()
@@ -54,12 +51,12 @@ class CasadiResponseObjective:
         like = self.like
         t = like.t
         out = []
-        for k, x, y, weight, derivs in like._layout0.moving:
+        for k, x, y, weight, derivs in like.layout.moving:
             surface = like.scene.surfaces[k]
             lines = [ln for ln in self.lines if ln.surface == surface.name]
             if not lines:
                 raise Unsupported(f"surfaces.{surface.name}.motion has no frequency and amplitude")
-            sx, sy, w = modal_points(surface.motion, x, y, like._cache)
+            sx, sy, w = modal_points(surface.motion, x, y, like.shape_cache)
             jac, hess = taylor_coefficients(derivs, sx, sy, w)
             form = [self._line_form(surface, ln, t) for ln in lines]
             self._verify(surface, lines, form, t)
@@ -71,7 +68,7 @@ class CasadiResponseObjective:
         phase 0, regressed on cos(w t), sin(w t)."""
         like = self.like
         alone = {ln.amplitude: 0.0 for ln in self.lines if ln.surface == surface.name and ln != line}
-        q = like._motion(surface, {**alone, line.amplitude: 1.0, line.phase: 0.0}).coefficients(t)
+        q = like.motion_with(surface, {**alone, line.amplitude: 1.0, line.phase: 0.0}).coefficients(t)
         wt = 2 * math.pi * like.base_value(line.frequency) * t
         basis = np.stack([np.cos(wt), np.sin(wt)], axis=1)
         coef = np.linalg.lstsq(basis, q, rcond=None)[0]  # (2, K)
@@ -94,9 +91,9 @@ class CasadiResponseObjective:
         if not probe:
             return
         for name, v in probe.items():
-            if like._motion(surface, {name: v}).shape_key() != surface.motion.shape_key():
+            if like.motion_with(surface, {name: v}).shape_key() != surface.motion.shape_key():
                 raise Unsupported(f"{name}: the motion's shapes depend on it")
-        moved = like._motion(surface, probe)
+        moved = like.motion_with(surface, probe)
         expected = self._coordinates(lines, form, {**{n: like.base_value(n) for ln in lines for n in ln.names()}, **probe},
                                      t, np)
         actual = moved.coefficients(t)
@@ -118,8 +115,8 @@ class CasadiResponseObjective:
     def _build(self) -> ca.Function:
         like, space = self.like, self.problem.space
         z = ca.MX.sym("z", len(space))
-        free = {n: _logistic_value(p, z[i]) for i, (n, p) in enumerate(zip(space.names, space.priors))}
-        log_prior = sum(_log_prior(p, z[i], free[n]) for i, (n, p) in enumerate(zip(space.names, space.priors)))
+        free = {n: casadi_value(p, z[i]) for i, (n, p) in enumerate(zip(space.names, space.priors))}
+        log_prior = sum(casadi_log_prior(p, z[i], free[n]) for i, (n, p) in enumerate(zip(space.names, space.priors)))
         value = lambda n: free.get(n, free.get(n[:-3]) if n.endswith("[0]") else None)
         t = ca.DM(like.t)
         ac = 0.0
@@ -134,11 +131,11 @@ class CasadiResponseObjective:
                         part = part + 0.5 * s["hess"][i, j] * qi * qj
             ac = ac + s["weight"] * part
         irr = free.get("sun.irradiance", like.scene.sun.irradiance)
-        level = irr * like._layout0.rest
+        level = irr * like.layout.rest
         y = ca.MX.sym("y", like.t.size)
         mask = ca.MX.sym("mask", like.t.size)
         # as ResponseLikelihood: residuals about the data's mean level, the AC part added last
-        r = (y - like._ref) - ((level - like._ref) + irr * ac)
+        r = (y - like.ref_level) - ((level - like.ref_level) + irr * ac)
         sigma = free.get("noise.sigma", like.scene.noise.sigma)
         var = sigma * sigma
         if like.scene.noise.photons_per_unit > 0:
@@ -149,7 +146,7 @@ class CasadiResponseObjective:
     def data(self, series=None) -> ca.DM:
         """(y with gaps zeroed, mask) of `series` (default: the problem's) as one parameter vector."""
         y = (series or self.like.series).intensity
-        return ca.vertcat(ca.DM(np.where(np.isfinite(y), y, self.like._ref)), ca.DM(np.isfinite(y).astype(float)))
+        return ca.vertcat(ca.DM(np.where(np.isfinite(y), y, self.like.ref_level)), ca.DM(np.isfinite(y).astype(float)))
 
     def __call__(self, z) -> float:
         n = self.like.t.size

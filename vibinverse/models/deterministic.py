@@ -19,23 +19,32 @@ import copy
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from forward.errors import SceneError
+from forward.errors import SceneError as ForwardSceneError
 from forward.motion import MOTION_KINDS
 from forward.motion.base import ModalMotion
 from forward.reduce import DEFAULT_RTOL, chebyshev_surface, compile_scene, footprint_layout, taylor_surface_ac
 from forward.scene_file import scene_from_table
 from forward.validation import Table
-from vibinverse.data import Series, with_sampling
-from vibinverse.estimators.spectral import harmonics
+from vibinverse.errors import SceneError, Unsupported
+from vibinverse.fisher import response_fisher
+from vibinverse.io.scenes import scene_of
+from vibinverse.io.series import Series, with_sampling
+from vibinverse.models.base import LineTest, SignalModel, register_model
+from vibinverse.models.deterministic_spectral import free_name, gain_from_level, response_guesses
+from vibinverse.priors import ParameterSpace, Prior
 from vibinverse.scene_keys import get_value, numeric_keys, set_value
+from vibinverse.spectrum import harmonics
+
+if TYPE_CHECKING:
+    from vibinverse.posterior import Posterior
 
 # values a fit cannot meaningfully free: they shape the computation, not the world
 _NOT_FITTABLE = ("sampling.", "infer.", "title", "footprint.resolution", "noise.")
-_AMPLITUDE_KEYS = ("center_deflection", "amplitude", "pressure", "boundary_amplitude")
+AMPLITUDE_KEYS = ("center_deflection", "amplitude", "pressure", "boundary_amplitude")
 TAYLOR_TOLERANCE = 0.1  # the Taylor model is used when its error bound is below this x the noise sd
 
 
@@ -67,30 +76,51 @@ class Line:
         return self.frequency, self.amplitude, self.phase
 
 
-class ResponseLikelihood:
-    """log p(data | parameters) for a scene whose motions are deterministic (plate, Rayleigh)."""
+@register_model
+class DeterministicModel(SignalModel):
+    """Deterministic vibrations (plate roofs, ground waves; secs. 4.1, 4.3) in white sensor noise."""
 
-    kind = "response"
+    name = "deterministic"
+    scene_defaults = {"sun.irradiance": 1.0}  # forward.scene.Sun
+
+    @classmethod
+    def describes(cls, table: dict) -> bool:
+        """Every motion of the scene is deterministic (a plate or a Rayleigh source), and one exists."""
+        kinds = [(s.get("motion") or {}).get("kind") for s in (table.get("surfaces") or {}).values()]
+        return any(k is not None for k in kinds) and "frame" not in kinds
+
+    @classmethod
+    def default_targets(cls, table: dict) -> list[str]:
+        """Frequency and amplitude of each vibration."""
+        out = []
+        for name, s in (table.get("surfaces") or {}).items():
+            motion = s.get("motion") or {}
+            if not motion:
+                continue
+            k = f"surfaces.{name}.motion."
+            out.append(k + "frequency")
+            out += [k + a for a in AMPLITUDE_KEYS if a in motion][:1]
+        return out
 
     def __init__(self, table: dict, series: Series):
         self.series = series
         self.t = series.time
         self.base = with_sampling(table, series)
-        self.scene = scene_from_table(self.base)
+        self.scene = scene_of(self.base)
         self._good = np.isfinite(series.intensity)
-        self._ref = float(np.mean(series.intensity[self._good]))
-        self._y_ref = series.intensity[self._good] - self._ref
+        self.ref_level = float(np.mean(series.intensity[self._good]))
+        self._y_ref = series.intensity[self._good] - self.ref_level
         if not any(isinstance(s.motion, ModalMotion) for s in self.scene.surfaces):
             raise SceneError("fit: the scene has no vibrating surface (a plate, rayleigh or frame motion)")
-        self._cache = _Bounded()
+        self.shape_cache = _Bounded()
         for s in self.scene.surfaces:  # an absent phase is 0: write it, so that it can be set
             m = (self.base["surfaces"][s.name].get("motion") or {})
             if isinstance(s.motion, ModalMotion) and "frequency" in m and "phase" not in m:
                 m["phase"] = [0.0] * len(m["frequency"]) if isinstance(m["frequency"], list) else 0.0
-        self._layout0 = footprint_layout(self.scene, self._cache)
-        self._kinds = {n: self._classify(n) for n in self.fittable()}
+        self.layout = footprint_layout(self.scene, self.shape_cache)
+        self.kinds = {n: self._classify(n) for n in self.fittable()}
         self._fixed: dict[str, float] = {}
-        self.model, self.model_error = self._choose_model()
+        self.reduction, self.reduction_error = self._choose_model()
 
     # ------------------------------------------------------------------ names
     def fittable(self) -> set[str]:
@@ -120,7 +150,7 @@ class ResponseLikelihood:
             if not isinstance(s.motion, ModalMotion):
                 continue
             k = f"surfaces.{s.name}.motion."
-            amp = next((a for a in _AMPLITUDE_KEYS if a in m), None)
+            amp = next((a for a in AMPLITUDE_KEYS if a in m), None)
             if amp is None:
                 continue
             if isinstance(m.get("frequency"), list):
@@ -151,7 +181,7 @@ class ResponseLikelihood:
         if name not in self._fixed:
             try:
                 self._fixed[name] = get_value(self.base, name)
-            except SceneError:
+            except ForwardSceneError:
                 if name == "sun.irradiance":
                     return self.scene.sun.irradiance
                 raise
@@ -161,26 +191,26 @@ class ResponseLikelihood:
     def _choose_model(self) -> tuple[str, float]:
         """Taylor (fast, re-formed per motion) when its error bound is well below the noise;
         otherwise the compiler's own choice per evaluation (Chebyshev or dense)."""
-        bound = compile_scene(self.scene, self.t, force="taylor2", shape_cache=self._cache).error_bound()
+        bound = compile_scene(self.scene, self.t, force="taylor2", shape_cache=self.shape_cache).error_bound()
         sd = self.noise_scale()
         return ("taylor2" if bound <= TAYLOR_TOLERANCE * sd else "compiled"), float(bound)
 
     def taylor_error(self, values: dict[str, float]) -> float:
         """The Taylor model's error bound at `values` (`forward.reduce`: cubic and quartic terms)."""
-        return float(compile_scene(scene_from_table(self._table(values)), self.t, force="taylor2",
-                                   shape_cache=self._cache).error_bound())
+        return float(compile_scene(scene_from_table(self.table_with(values)), self.t, force="taylor2",
+                                   shape_cache=self.shape_cache).error_bound())
 
-    def _table(self, values: dict[str, float]) -> dict:
+    def table_with(self, values: dict[str, float]) -> dict:
         """The scene table with `values` set (noise.sigma is the likelihood's, not the scene's)."""
         table = copy.deepcopy(self.base)
         for n, v in values.items():
-            if self._kinds.get(n) in ("scene", "motion", "gain"):
+            if self.kinds.get(n) in ("scene", "motion", "gain"):
                 set_value(table, n, v)
         return table
 
     def use_compiled(self) -> None:
         """Evaluate the mean with the compiler's own choice (Chebyshev or dense) from now on."""
-        self.model = "compiled"
+        self.reduction = "compiled"
 
     def noise_scale(self) -> float:
         """The sensor noise sd: the scene's sigma, else a robust estimate from the data's
@@ -200,22 +230,22 @@ class ResponseLikelihood:
     def parts(self, values: dict[str, float]) -> tuple[float, np.ndarray]:
         """(x at rest, x(t) - x at rest) at the given values: the AC part formed directly (Taylor),
         so that a signal ~1e-12 of the mean level keeps its digits in the likelihood."""
-        scene_keys = {n: v for n, v in values.items() if self._kinds.get(n) == "scene"}
+        scene_keys = {n: v for n, v in values.items() if self.kinds.get(n) == "scene"}
         if scene_keys:
-            scene = scene_from_table(self._table(values))
-            if self.model == "compiled":
-                return compile_scene(scene, self.t, DEFAULT_RTOL, shape_cache=self._cache).parts()
-            return self._taylor(footprint_layout(scene, self._cache), [s.motion for s in scene.surfaces],
+            scene = scene_from_table(self.table_with(values))
+            if self.reduction == "compiled":
+                return compile_scene(scene, self.t, DEFAULT_RTOL, shape_cache=self.shape_cache).parts()
+            return self._taylor(footprint_layout(scene, self.shape_cache), [s.motion for s in scene.surfaces],
                                 scene.sun.irradiance)
         motions = [s.motion for s in self.scene.surfaces]
-        touched = {n.split(".")[1] for n in values if self._kinds.get(n) == "motion"}
+        touched = {n.split(".")[1] for n in values if self.kinds.get(n) == "motion"}
         for k, s in enumerate(self.scene.surfaces):
             if s.name in touched:
-                motions[k] = self._motion(s, values)
+                motions[k] = self.motion_with(s, values)
         irradiance = values.get("sun.irradiance", self.scene.sun.irradiance)
-        if self.model == "compiled":
+        if self.reduction == "compiled":
             return self._interpolated(motions, irradiance)
-        return self._taylor(self._layout0, motions, irradiance)
+        return self._taylor(self.layout, motions, irradiance)
 
     def _interpolated(self, motions: list, irradiance: float) -> tuple[float, np.ndarray]:
         """The compiled model for new motion values on the scene's geometry: each surface's X(q) is
@@ -223,26 +253,26 @@ class ResponseLikelihood:
         reused while the coordinates stay inside it and the shapes do not change; a larger box is
         built when they leave it."""
         ac = np.zeros(self.t.size)
-        for k, x, y, weight, _ in self._layout0.moving:
+        for k, x, y, weight, _ in self.layout.moving:
             q = motions[k].coefficients(self.t)
             reach = np.abs(q).max(axis=0)
             key = ("chebyshev", k, motions[k].shape_key())
-            model, box = self._cache.get(key, (None, np.zeros(reach.size)))
+            model, box = self.shape_cache.get(key, (None, np.zeros(reach.size)))
             if model is None or np.any(reach > box):
                 box = 1.5 * np.maximum(reach, box)
                 moved = dataclasses.replace(self.scene.surfaces[k], motion=motions[k])
-                model = chebyshev_surface(moved, self.scene, x, y, box, DEFAULT_RTOL, self._cache)
-                self._cache[key] = (model, box)
+                model = chebyshev_surface(moved, self.scene, x, y, box, DEFAULT_RTOL, self.shape_cache)
+                self.shape_cache[key] = (model, box)
             ac += weight * (model.evaluate(*q.T) - model.value0)
-        return irradiance * self._layout0.rest, irradiance * ac
+        return irradiance * self.layout.rest, irradiance * ac
 
     def _taylor(self, layout: Any, motions: list, irradiance: float) -> tuple[float, np.ndarray]:
         ac = np.zeros(self.t.size)
         for k, x, y, weight, derivs in layout.moving:
-            ac += weight * taylor_surface_ac(motions[k], x, y, derivs, self.t, self._cache)
+            ac += weight * taylor_surface_ac(motions[k], x, y, derivs, self.t, self.shape_cache)
         return irradiance * layout.rest, irradiance * ac
 
-    def _motion(self, surface: Any, values: dict[str, float]) -> ModalMotion:
+    def motion_with(self, surface: Any, values: dict[str, float]) -> ModalMotion:
         """The surface's motion rebuilt from its scene table with the given values set."""
         prefix = f"surfaces.{surface.name}.motion."
         sub = dict(self.base["surfaces"][surface.name]["motion"])
@@ -268,11 +298,11 @@ class ResponseLikelihood:
     def log_likelihood(self, values: dict[str, float]) -> float:
         try:
             level, ac = self.parts(values)
-        except SceneError:  # a value outside what the scene allows
+        except ForwardSceneError:  # a value outside what the scene allows
             return -math.inf
         # residuals about the data's mean level: y - x = (y - ref) - ((level - ref) + ac), so that
         # no sample's residual is a difference of two numbers at the mean level
-        r = self._y_ref - ((level - self._ref) + ac[self._good])
+        r = self._y_ref - ((level - self.ref_level) + ac[self._good])
         noise = self.scene.noise
         var = self.variance(level + ac if noise.photons_per_unit > 0 or noise.adc_bits > 0 else None, values)
         if np.ndim(var):
@@ -283,3 +313,108 @@ class ResponseLikelihood:
         if np.ndim(var):
             return float(-0.5 * (np.sum(r * r / var) + np.sum(np.log(var)) + n * math.log(2 * math.pi)))
         return float(-0.5 * (np.dot(r, r) / var + n * math.log(2 * math.pi * var)))
+
+    # ------------------------------------------------------------------ what the estimators need
+    def check_free(self, names: list[str]) -> None:
+        super().check_free(names)
+        if "noise.sigma" not in names and not self.variance(np.ones(1), {}) > 0:
+            raise SceneError("noise.sigma: the scene's sensor noise is 0, so no data fit it; set noise.sigma > 0 "
+                             "or free it (--free 'noise.sigma=loguniform(a, b)')")
+
+    def default_priors(self) -> dict[str, Prior]:
+        """Each line's frequency (the whole band for one line; between the neighbours' midpoints for
+        several, so that lines cannot swap), amplitude (0 to 100x the scene's value), phase (a 2 pi
+        window centred on the spectral estimate, so that the posterior does not straddle the wrap;
+        a pi window for a line the footprint sees only at second order, where the phase is defined
+        mod pi), the calibration gain sun.irradiance (within 2x of what the data's mean level
+        implies) and the sensor noise sigma."""
+        series = self.series
+        lines = self.lines()
+        if not lines:
+            raise SceneError("fit: the scene's motions have no frequency and amplitude to fit; give an [infer] table")
+        nyq = 0.5 * series.fs
+        lo = max(3.0 / (series.time[-1] - series.time[0]), 1e-6)
+        f0 = sorted(self.base_value(ln.frequency) for ln in lines)
+        same = [a for a, b in zip(f0, f0[1:]) if a == b]
+        if same:
+            raise SceneError(f"fit: two lines share the frequency {same[0]:g} Hz in the scene, so default priors cannot "
+                             "keep them apart; give their frequencies priors in [infer.free] or --free")
+        edges = [lo, *((a + b) / 2 for a, b in zip(f0, f0[1:])), nyq]
+        free: dict[str, Prior] = {}
+        for line in lines:
+            f, a = self.base_value(line.frequency), self.base_value(line.amplitude)
+            if not a > 0:
+                raise SceneError(f"{line.amplitude}: the scene's value sets the scale of the default prior and must be "
+                                 "> 0 (or give the prior in [infer.free])")
+            i = f0.index(f)
+            free[line.frequency] = Prior("uniform", (edges[i], edges[i + 1]))
+            free[line.amplitude] = Prior("uniform", (0.0, 100.0 * a))
+            free[line.phase] = Prior("uniform", (-np.pi, np.pi))
+        scale = float(np.nanmax(np.abs(series.intensity)))
+        gain = gain_from_level(series, self)
+        if gain > 0:  # (NaN when the model or the data have no positive level: the gain stays fixed)
+            free["sun.irradiance"] = Prior("loguniform", (gain / 2, gain * 2))
+        free["noise.sigma"] = Prior("loguniform", (max(1e-9 * scale, 1e-300), 10.0 * float(np.nanstd(series.intensity))))
+        space = ParameterSpace(free)
+        guesses = [{n: free[n].inside(g.get(n, free[n].centre())) for n in free}
+                   for g in self.guesses({n: p.bounds for n, p in free.items()})]
+
+        def log_posterior(g: dict[str, float]) -> float:
+            lp = space.log_prior_z(space.to_z(g))
+            return lp + self.log_likelihood(g) if math.isfinite(lp) else -math.inf
+
+        best = max(guesses, key=lambda g: _finite(log_posterior(g)))
+        for line in lines:  # seen only at second order, the phase is defined modulo pi
+            c, half = best[line.phase], 0.5 * self.phase_period(line.phase)
+            free[line.phase] = Prior("uniform", (c - half, c + half))
+        return free
+
+    def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
+        """Periodogram peaks in each frequency prior and in twice it (taken as 2f), amplitudes and
+        phases calibrated through the forward model (`deterministic_spectral.response_guesses`)."""
+        return response_guesses(self.series, self, bounds)
+
+    def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
+        """Each line with its amplitude set to 0: `vibration` (one line) or `vibration_i` (several)."""
+        lines = self.lines()
+        out = []
+        for i, line in enumerate(lines):
+            null = {line.amplitude: 0.0}
+            if free_name(line.amplitude, set(values)) and line.amplitude not in values:
+                null[line.amplitude[:-3]] = 0.0
+            out.append(LineTest("vibration" if len(lines) == 1 else f"vibration_{i}", null,
+                                free_name(line.frequency, set(free))))
+        return out
+
+    def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
+        """D^T diag(1/var) D of the mean, plus the variance term of noise.sigma (`vibinverse.fisher`)."""
+        return response_fisher(self, values, names)
+
+    def casadi_objective(self, posterior: Posterior) -> Any:
+        """`deterministic_casadi.CasadiResponseObjective` (Unsupported names the value that breaks its form)."""
+        from vibinverse.models.deterministic_casadi import CasadiResponseObjective
+
+        return CasadiResponseObjective(posterior)
+
+    def describe(self) -> dict[str, Any]:
+        """Which reduced model is the likelihood's mean, and its error bound."""
+        return {"kind": self.reduction, "error_bound": self.reduction_error}
+
+    def refine(self, values: dict[str, float]) -> tuple[dict[str, Any], str | None]:
+        """Switch to the compiled (Chebyshev) model when the Taylor mean's error bound at the fit
+        exceeds TAYLOR_TOLERANCE x the noise sd (the model was chosen at the scene's values; the fit
+        may sit at a larger amplitude)."""
+        if self.reduction != "taylor2":
+            return {}, None
+        bound = self.taylor_error(values)
+        sd = float(np.sqrt(np.mean(self.variance(self.mean(values), values))))
+        if bound > TAYLOR_TOLERANCE * sd:
+            self.use_compiled()
+            return ({"error_bound_at_fit": bound}, "the Taylor model's error is not small against the noise at the "
+                    "fit; refitting with the compiled (Chebyshev) model")
+        return {"error_bound_at_fit": bound}, None
+
+
+def _finite(v: float) -> float:
+    return v if np.isfinite(v) else -np.inf
+

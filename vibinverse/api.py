@@ -1,0 +1,122 @@
+"""The public Python API; `import vibinverse as vi` exposes every name here. The command line is a
+thin layer over these functions.
+
+    series = vi.load_series("frame.csv")
+    scene = vi.load_scene("examples/scenes/roof_frame.toml", ["noise.sigma=0.6"])
+    result = vi.fit(series, scene, method="casadi")
+    result.summary()["parameters"]; result.detections; result.to_netcdf("result.nc")
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from forward.reduce import DEFAULT_RTOL
+from forward.sensor import Observation, observe
+from vibinverse.errors import InputError, scene_errors
+from vibinverse.io.scenes import load_scene, scene_of
+from vibinverse.io.series import Series, load_series
+from vibinverse.models import build_model
+from vibinverse.posterior import Posterior
+from vibinverse.priors import Prior, parse_free, parse_prior
+from vibinverse.result import Detection, FitResult
+
+__all__ = ["Observation", "design", "detect", "fit", "load_scene", "load_series", "posterior", "simulate"]
+
+SceneLike = str | Path | Mapping[str, Any]
+SeriesLike = str | Path | Series
+
+
+def _table(scene: SceneLike, overrides: Sequence[str] = ()) -> dict[str, Any]:
+    if isinstance(scene, Mapping):
+        if overrides:
+            from forward.scene_file import apply_overrides
+
+            with scene_errors():
+                return apply_overrides(copy.deepcopy(dict(scene)), list(overrides))
+        return copy.deepcopy(dict(scene))
+    return load_scene(scene, overrides)
+
+
+def _series(series: SeriesLike) -> Series:
+    return series if isinstance(series, Series) else load_series(series)
+
+
+def _priors(free: Mapping[str, Prior | str] | None, table: dict[str, Any]) -> dict[str, Prior] | None:
+    """Free parameters: `free` (priors or prior strings), else the scene's [infer] table, else None
+    (the model's defaults)."""
+    out = parse_free([], table.get("infer"))
+    for name, prior in (free or {}).items():
+        out[name] = prior if isinstance(prior, Prior) else parse_prior(str(prior), name)
+    return out or None
+
+
+def posterior(series: SeriesLike, scene: SceneLike, *, free: Mapping[str, Prior | str] | None = None,
+              model: str | None = None, overrides: Sequence[str] = ()) -> Posterior:
+    """The posterior of the free parameters (default: the scene's [infer] table, else the model's
+    default priors) given `series`; `model` names a registered signal model (default: the one
+    that describes the scene)."""
+    table = _table(scene, overrides)
+    data = _series(series)
+    with scene_errors():
+        sm = build_model(table, data, model)
+        return Posterior(sm, _priors(free, table))
+
+
+def fit(series: SeriesLike, scene: SceneLike, *, method: str = "auto", free: Mapping[str, Prior | str] | None = None,
+        model: str | None = None, overrides: Sequence[str] = (), seed: int = 0, chain: str | Path | None = None,
+        resume: bool = False, workers: int = 1, max_steps: int = 20000, progress: bool = False) -> FitResult:
+    """Fit a measured series against the scene that describes the observation.
+
+    method: spectral | sindy | casadi | map | mcmc | auto (spectral -> SINDy -> casadi -> emcee,
+    each seeding the next). `chain` is the emcee checkpoint (HDF5; `resume` continues it).
+    """
+    from vibinverse.pipeline import run
+
+    if workers < 1 or max_steps < 1:
+        raise InputError("workers and max_steps: must be >= 1")
+    post = posterior(series, scene, free=free, model=model, overrides=overrides)
+    with scene_errors():
+        return run(post, method, seed=seed, backend=Path(chain) if chain else None, resume=resume, workers=workers,
+                   max_steps=max_steps, progress=progress)
+
+
+def detect(data: SeriesLike | FitResult, scene: SceneLike | None = None, *,
+           free: Mapping[str, Prior | str] | None = None, model: str | None = None,
+           overrides: Sequence[str] = ()) -> list[Detection]:
+    """Which lines the data show: the detection test of every line of the model (log-likelihood
+    gain against a 5-sigma threshold with the look-elsewhere term) at the MAP, or of a fit's result."""
+    if isinstance(data, FitResult):
+        return data.detections
+    if scene is None:
+        raise InputError("detect: a scene is needed to test a series (or pass a FitResult)")
+    return fit(data, scene, method="casadi", free=free, model=model, overrides=overrides).detections
+
+
+def simulate(scene: SceneLike, *, seed: int | None = None, overrides: Sequence[str] = (),
+             rtol: float | None = DEFAULT_RTOL) -> Observation:
+    """The pixel series of a scene (time, intensity, intensity_clean, sensitivity (21)); rtol=None
+    evaluates every subpixel at every sample (the dense reference)."""
+    if rtol is not None and not (rtol > 0 and rtol < float("inf")):
+        raise InputError(f"rtol: {rtol:g} is outside the allowed range (0, inf)")
+    table = _table(scene, overrides)
+    with scene_errors():
+        return observe(scene_of(table), seed, rtol)
+
+
+def design(scene: SceneLike, *, vary: Sequence[str] = (), targets: Sequence[str] | None = None,
+           threshold: float = 1e-4, workers: int = 1, overrides: Sequence[str] = (),
+           progress: bool = False) -> dict[str, Any]:
+    """Design of observation over a sweep (`KEY=start:stop:num` or `KEY=a,b,c` each): sensitivity,
+    line SNR and Cramer-Rao sds per configuration, ranked. Returns {"axes", "targets", "rows",
+    "best", "threshold", "seconds"} (`vibinverse.design.sweep.run_design`)."""
+    from vibinverse.design.sweep import run_design
+
+    if workers < 1:
+        raise InputError(f"--workers: {workers}; allowed range [1, inf)")
+    table = _table(scene, overrides)
+    with scene_errors():
+        return run_design(table, list(vary), list(targets) if targets else None, threshold, workers, progress=progress)

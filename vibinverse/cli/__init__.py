@@ -1,0 +1,76 @@
+"""The `vibinverse` command line: a thin layer over the public API (`vibinverse.api`).
+
+Errors are mapped to exit codes here, in one place (`EXIT_CODES`): bad input exits with code 2 and
+one line on stderr naming the problem, with no traceback and no partial output file.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+
+from forward.errors import SceneError as ForwardSceneError
+from vibinverse.errors import InputError, Interrupted, NumericalError, VibinverseError
+
+# the most specific class first; forward's scene errors count as input errors
+EXIT_CODES: tuple[tuple[type[BaseException], int], ...] = (
+    (Interrupted, 130),
+    (InputError, 2),
+    (ForwardSceneError, 2),
+    (NumericalError, 3),
+    (VibinverseError, 1),
+)
+
+
+class _ConsoleHandler(logging.Handler):
+    """Messages to the current sys.stdout, warnings and errors to sys.stderr (looked up per record)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        stream = sys.stderr if record.levelno >= logging.WARNING else sys.stdout
+        try:
+            stream.write(self.format(record) + "\n")
+            stream.flush()
+        except Exception:  # noqa: BLE001 - logging must never raise
+            self.handleError(record)
+
+
+def configure_logging(quiet: bool = False, verbose: bool = False) -> None:
+    """The package's log to the console: INFO by default, WARNING with -q, DEBUG with -v."""
+    root = logging.getLogger("vibinverse")
+    for h in [h for h in root.handlers if isinstance(h, _ConsoleHandler)]:
+        root.removeHandler(h)
+    handler = _ConsoleHandler()
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    root.addHandler(handler)
+    root.setLevel(logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO)
+    root.propagate = False
+
+
+def exit_code(exc: BaseException) -> int:
+    """The exit code of an error (`EXIT_CODES`)."""
+    return next(code for cls, code in EXIT_CODES if isinstance(exc, cls))
+
+
+def main(argv: list[str] | None = None) -> int:
+    from vibinverse.cli.commands import build_parser
+
+    configure_logging()
+    try:
+        args = build_parser().parse_args(argv)
+        configure_logging(getattr(args, "quiet", False), getattr(args, "verbose", False))
+        args.func(args)
+    except (VibinverseError, ForwardSceneError) as exc:
+        print(f"vibinverse: error: {exc}" if not isinstance(exc, Interrupted) else f"vibinverse: {exc}",
+              file=sys.stderr)
+        return exit_code(exc)
+    except KeyboardInterrupt:
+        print("vibinverse: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # output piped into a reader that stopped (e.g. head)
+        sys.stderr.close()
+        return 0
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,5 @@
+import sys
+
+from vibinverse.cli import main
+
+sys.exit(main())

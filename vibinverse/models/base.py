@@ -1,0 +1,150 @@
+"""The one interface every signal model implements, and the registry that finds a model for a scene.
+
+A signal model is what the estimators need to know about the data's origin, and nothing of how
+they estimate: named parameters with default priors for a series, the mean and the exact
+log-likelihood, initial guesses from the spectrum, the lines to test for detection, and the Fisher
+information. The frame model (a noise-driven resonance with drive lines; Kalman likelihood) and the
+deterministic model (plate and ground vibrations; white-noise likelihood) are two implementations;
+a new one is a subclass decorated with `register_model`, found by `model_class_for`, and fitted by
+the same pipeline (`vibinverse.pipeline`) with no other change.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+from vibinverse.errors import SceneError, Unsupported
+from vibinverse.io.series import Series
+
+if TYPE_CHECKING:
+    from vibinverse.posterior import Posterior
+    from vibinverse.priors import Prior
+
+
+@dataclass(frozen=True)
+class LineTest:
+    """One line the fit claims: `label` names it in the summary (`{label}_detected`, ...), `null`
+    are the values that remove it from the model (an amplitude set to 0), and `frequency` is the
+    name of its frequency when that is free (the look-elsewhere effect), else None."""
+
+    label: str
+    null: dict[str, float]
+    frequency: str | None
+
+
+class SignalModel(ABC):
+    """A model of a measured series: mean, likelihood, priors, starts, line tests, Fisher information.
+
+    Parameters are addressed by dotted scene names (`surfaces.roof.motion.tilt_frequency`,
+    `noise.sigma`); `values` passed to a method hold the free ones, the others come from the scene.
+    """
+
+    name: ClassVar[str]  # the registry key
+    #: IPOPT runs from every start whose log posterior is within this margin of the best start's
+    map_start_margin: ClassVar[float] = math.inf
+    #: values a scene file may leave out, with the value the forward model then uses
+    scene_defaults: ClassVar[dict[str, float]] = {}
+
+    series: Series
+    base: dict[str, Any]
+
+    @classmethod
+    @abstractmethod
+    def describes(cls, table: dict[str, Any]) -> bool:
+        """Whether this model describes the scene table (the registry's choice)."""
+
+    @classmethod
+    def truth_table(cls, table: dict[str, Any]) -> dict[str, Any]:
+        """The scene table under the names this model's parameters use (the truth of simulated data)."""
+        return table
+
+    @classmethod
+    def default_targets(cls, table: dict[str, Any]) -> list[str]:
+        """The parameters an observer wants bounded (design of observation)."""
+        return []
+
+    @abstractmethod
+    def fittable(self) -> set[str]:
+        """Every name this model's likelihood reads."""
+
+    @abstractmethod
+    def default_priors(self) -> dict[str, Prior]:
+        """The free parameters and priors an analyst fits when the scene names none."""
+
+    @abstractmethod
+    def mean(self, values: dict[str, float]) -> np.ndarray:
+        """The deterministic part of the signal at `values`."""
+
+    @abstractmethod
+    def log_likelihood(self, values: dict[str, float]) -> float:
+        """log p(data | values) (the exact likelihood; -inf outside what the model allows)."""
+
+    @abstractmethod
+    def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
+        """Starting values of the free parameters (keys of `bounds`) from the spectrum, most
+        plausible first; the posterior decides between them."""
+
+    @abstractmethod
+    def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
+        """The lines the fit at `values` claims, each with the values that remove it."""
+
+    @abstractmethod
+    def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
+        """Fisher information of `names` at `values`."""
+
+    def check_free(self, names: list[str]) -> None:
+        """One-line SceneError when these free parameters cannot be fitted on this model."""
+        fittable = self.fittable()
+        for name in names:
+            if name not in fittable:
+                raise SceneError(f"fit: {name} cannot be fitted (yet); free parameters of this scene: "
+                                 f"{', '.join(sorted(fittable))}")
+
+    def phase_period(self, name: str) -> float:
+        """The period of a phase parameter as the data see it."""
+        return 2 * math.pi
+
+    def casadi_objective(self, posterior: Posterior) -> Any:
+        """-log posterior as a casadi Function of (z, y, mask) with `.function` and `.data(series)`;
+        Unsupported names the value that leaves the casadi form."""
+        raise Unsupported(f"no casadi form of the {self.name} model")
+
+    def refine(self, values: dict[str, float]) -> tuple[dict[str, Any], str | None]:
+        """Re-check the model's approximations at a fit: (facts for the summary's data.model, a
+        message when the model changed how it evaluates the mean, so that the MAP must run again)."""
+        return {}, None
+
+    def describe(self) -> dict[str, Any] | None:
+        """What the summary's data.model records (None: nothing)."""
+        return None
+
+
+MODELS: dict[str, type[SignalModel]] = {}
+
+
+def register_model(cls: type[SignalModel]) -> type[SignalModel]:
+    """Class decorator: make a model available to `model_class_for` (later registrations are asked first)."""
+    MODELS[cls.name] = cls
+    return cls
+
+
+def model_class_for(table: dict[str, Any], name: str | None = None) -> type[SignalModel]:
+    """The registered model that describes `table` (or the one registered as `name`)."""
+    if name is not None:
+        if name not in MODELS:
+            raise SceneError(f"model: {name!r} is not one of {', '.join(MODELS)}")
+        return MODELS[name]
+    for cls in reversed(list(MODELS.values())):
+        if cls.describes(table):
+            return cls
+    raise SceneError("fit: the scene has no vibrating surface (a plate, rayleigh or frame motion)")
+
+
+def build_model(table: dict[str, Any], series: Series, name: str | None = None) -> SignalModel:
+    """The model of `table` for `series` (`model_class_for`)."""
+    return model_class_for(table, name)(table, series)

@@ -1,0 +1,98 @@
+"""The fitting pipeline: spectral -> SINDy -> MAP (casadi, else scipy) -> emcee, each stage seeding
+the next; `--method` stops it at a stage. A stage that fails is recorded and the chain goes on: a
+declined SINDy leaves the MAP to start from the spectral candidates, and a casadi MAP that does not
+cover the model or fails falls back to the derivative-free MAP."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from vibinverse.errors import InputError, NumericalError, Unsupported
+from vibinverse.estimators import CasadiMap, Emcee, ScipyMap, SindyEstimator, SpectralEstimator
+from vibinverse.io.series import check_resolves
+from vibinverse.posterior import Posterior
+from vibinverse.result import FitResult
+
+logger = logging.getLogger(__name__)
+
+METHODS = ("spectral", "sindy", "casadi", "map", "mcmc", "auto")
+
+
+def check_priors(posterior: Posterior) -> None:
+    """One-line errors for frequency priors the data cannot resolve (above Nyquist, too few cycles)."""
+    series = posterior.series
+    nyq = 0.5 * series.fs
+    for n, (lo, hi) in posterior.bounds.items():
+        if n.split("[")[0].endswith("frequency"):
+            if hi > nyq * (1 + 1e-12):
+                raise InputError(f"{n}: the prior reaches {hi:g} Hz, above the Nyquist frequency {nyq:g} Hz of the data")
+            check_resolves(series, max(lo, 1e-12), n)  # the lowest frequency needs the longest record
+
+
+def run(posterior: Posterior, method: str = "auto", *, seed: int = 0, backend: Path | None = None,
+        resume: bool = False, workers: int = 1, max_steps: int = 20000, progress: bool = True) -> FitResult:
+    """Fit `posterior` by `method` (one of METHODS); the result's timing holds every stage's seconds."""
+    if method not in METHODS:
+        raise InputError(f"--method: {method!r} is not one of {', '.join(METHODS)}")
+    check_priors(posterior)
+    if method == "sindy" and not SindyEstimator.covers(posterior):
+        SindyEstimator().estimate(posterior, None)  # raises Unsupported with the reason
+    timing: dict[str, float] = {}
+    spectral = SpectralEstimator().fit(posterior)
+    timing.update(spectral.timing)
+    if method == "spectral":
+        return spectral
+    start, sindy = spectral, None
+    if method == "sindy" or (method == "auto" and SindyEstimator.covers(posterior)):
+        stage = SindyEstimator().fit(posterior, spectral)
+        timing.update(stage.timing)
+        if method == "sindy":
+            stage.timing = timing
+            return stage
+        sindy = stage.diagnostics["sindy"]
+        start = stage
+    best = map_stage(posterior, start, method, seed)
+    timing.update(best.timing)
+    if method in ("map", "casadi"):
+        best.timing = timing
+        return best
+    result = Emcee().fit(posterior, best, backend=backend, resume=resume, workers=workers, seed=seed,
+                         max_steps=max_steps, progress=progress)
+    timing.update(result.timing)
+    result.timing = timing
+    result.method = "mcmc" if method == "mcmc" else "auto"
+    result.data = {**result.data, **({"model": best.data["model"]} if "model" in best.data else {})}
+    if sindy is not None:
+        result.diagnostics["sindy"] = sindy
+    return result
+
+
+def map_stage(posterior: Posterior, start: FitResult, method: str, seed: int) -> FitResult:
+    """MAP from every candidate start: casadi + IPOPT with exact derivatives, except for method
+    "map" (derivative-free scipy), which is also the fallback when casadi does not cover the model
+    or fails. When the model changes its evaluation at the optimum (`SignalModel.refine`), the MAP
+    runs again from there."""
+    result = _map(posterior, start, method, seed)
+    facts, message = posterior.model.refine(result.point)
+    if message:
+        logger.info("%s", message)
+        again = _map(posterior, result, method, seed)
+        again.timing = {k: again.timing.get(k, 0.0) + result.timing.get(k, 0.0)
+                        for k in {*again.timing, *result.timing}}
+        result = again
+    if facts:
+        result.data["model"] = {**result.data.get("model", {}), **posterior.model.describe(), **facts}
+    return result
+
+
+def _map(posterior: Posterior, start: FitResult, method: str, seed: int) -> FitResult:
+    if method != "map":
+        try:
+            return CasadiMap().fit(posterior, start, seed=seed)
+        except Unsupported as exc:
+            logger.info("the casadi MAP does not cover this fit (%s); using the scipy MAP", exc)
+        except (NumericalError, RuntimeError) as exc:  # any solver failure falls back, and says so
+            logger.warning("casadi MAP failed (%s); using the derivative-free MAP", str(exc).splitlines()[0][:120])
+    return ScipyMap().fit(posterior, start, seed=seed)
+

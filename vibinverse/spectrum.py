@@ -1,0 +1,77 @@
+"""Spectral tools shared by the models' starting values and by design: periodogram (FFT or
+Lomb-Scargle), least-squares sinusoids and harmonics, and ranked line candidates.
+
+Milliseconds, rough, and gap-tolerant.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import lombscargle
+
+from vibinverse.io.series import Series
+
+
+def periodogram(series: Series, pad: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Power of the de-meaned series on (0, Nyquist]. Uniform sampling: FFT with `pad`-fold zero
+    padding, gaps filled with the mean; otherwise Lomb-Scargle on the valid samples."""
+    good = np.isfinite(series.intensity)
+    y = series.intensity - np.nanmean(series.intensity)
+    if series.uniform:
+        filled = np.where(good, y, 0.0)
+        n = pad * filled.size
+        power = np.abs(np.fft.rfft(filled, n)) ** 2 / max(good.sum(), 1)
+        freqs = np.fft.rfftfreq(n, series.dt)
+        return freqs[1:], power[1:]
+    t = series.time[good]
+    span = t[-1] - t[0]
+    freqs = np.linspace(0.5 / span, 0.5 * series.fs, int(pad * span * series.fs / 2))
+    return freqs, lombscargle(t, y[good], 2 * np.pi * freqs)  # y is de-meaned over the valid samples
+
+
+def sinusoid(t: np.ndarray, y: np.ndarray, f: float) -> tuple[float, float, np.ndarray]:
+    """Least-squares A cos(2 pi f t + phi) + c on the valid samples: (A, phi, fitted curve)."""
+    good = np.isfinite(y)
+    basis = np.stack([np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t), np.ones_like(t)], axis=1)
+    coef = np.linalg.lstsq(basis[good], y[good], rcond=None)[0]
+    return float(np.hypot(coef[0], coef[1])), float(np.arctan2(-coef[1], coef[0])), basis @ coef
+
+
+def harmonics(t: np.ndarray, y: np.ndarray, f: float, nyq: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(amplitude, phase) of y's sinusoids at f and 2f (2f at or above Nyquist: (0, 0))."""
+    return sinusoid(t, y, f)[:2], (sinusoid(t, y, 2 * f)[:2] if 2 * f < nyq else (0.0, 0.0))
+
+
+def _refine(freqs: np.ndarray, power: np.ndarray, i: int) -> float:
+    if 0 < i < len(freqs) - 1:
+        a, b, c = np.log(power[i - 1:i + 2] + 1e-300)
+        den = a - 2 * b + c
+        if den < 0:
+            return float(freqs[i] + 0.5 * (a - c) / den * (freqs[1] - freqs[0]))
+    return float(freqs[i])
+
+
+def line_candidates(series: Series, band: tuple[float, float], n_candidates: int = 3) -> list[float]:
+    """Periodogram peaks in `band` (at least 0.3 Hz apart), most steady first: a drive is the same
+    sinusoid in each quarter of the record, while a noise-driven resonance's phase wanders over its
+    coherence time 1/(zeta omega). Steadiness ranks; the MAP fit decides between the candidates."""
+    freqs, power = periodogram(series)
+    sel = (freqs >= band[0]) & (freqs <= band[1])
+    if not sel.any():
+        return []
+    idx = np.flatnonzero(sel)
+    order = idx[np.argsort(power[idx])[::-1]]
+    picked: list[int] = []
+    for i in order:
+        if all(abs(freqs[i] - freqs[j]) > 0.3 for j in picked):
+            picked.append(int(i))
+        if len(picked) == n_candidates:
+            break
+    t, y = series.time, series.intensity
+    quarter = np.minimum((4 * (t - t[0]) / (t[-1] - t[0] + series.dt)).astype(int), 3)
+    scored = []
+    for i in picked:
+        f = _refine(freqs, power, i)
+        z = np.array([a * np.exp(1j * p) for a, p, _ in (sinusoid(t[quarter == j], y[quarter == j], f) for j in range(4))])
+        scored.append((float(np.abs(z - z.mean()).max() / max(np.abs(z.mean()), 1e-300)), f))
+    return [f for _, f in sorted(scored)]
