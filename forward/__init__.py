@@ -8,4 +8,4 @@ from forward.render import pixel_signal, sensitivity
 from forward.scene_file import load_scene, scene_from_table
 from forward.sensor import Observation, observe
 
-__all__ = ["SceneError", "load_scene", "scene_from_table", "observe", "Observation", "pixel_signal", "sensitivity"]
+__all__ = ["Observation", "SceneError", "load_scene", "observe", "pixel_signal", "scene_from_table", "sensitivity"]

@@ -40,8 +40,11 @@ def lobe_solid_angle(m: float, theta_i: ArrayLike) -> NDArray[np.float64]:
     for j, t in enumerate(th):
         full = min(max(np.pi / 2 - t, 0.0), top)  # cone entirely above the horizon
         cut = min(np.pi / 2 + t, top)  # cone entirely below beyond this
-        val = 2 * np.pi * quad(lambda a: np.exp(-0.5 * (a / m) ** 2) * np.sin(a), 0.0, full,
-                               epsabs=0.0, epsrel=1e-12, limit=200)[0]
+        val = (
+            2
+            * np.pi
+            * quad(lambda a: np.exp(-0.5 * (a / m) ** 2) * np.sin(a), 0.0, full, epsabs=0.0, epsrel=1e-12, limit=200)[0]
+        )
         if cut > full:
             cot_t = np.cos(t) / np.sin(t)
 
@@ -73,8 +76,9 @@ def lobe_normalization(m: float, theta_i: ArrayLike) -> NDArray[np.float64]:
     return np.where(s >= spline.x[-1], far, spline(np.clip(s, 0.0, spline.x[-1])))
 
 
-def specular_lobe(cos_i: ArrayLike, cos_v: ArrayLike, alpha: ArrayLike, reflectance: ArrayLike,
-                  m: float, theta_i: ArrayLike) -> NDArray[np.float64]:
+def specular_lobe(
+    cos_i: ArrayLike, cos_v: ArrayLike, alpha: ArrayLike, reflectance: ArrayLike, m: float, theta_i: ArrayLike
+) -> NDArray[np.float64]:
     """B = cos_i R(theta_i) C(m, theta_i) exp(-alpha^2 / 2 m^2) / cos_v, eq. (23).
 
     alpha: angle between the mirror direction and the view; m: lobe width (RMS slope, rad).

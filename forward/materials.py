@@ -91,4 +91,3 @@ def material_from_spec(spec: object, key: str) -> Material:
     raise SceneError(
         f"{key}: a material table has exactly one of: albedo | index | conductivity + wavelength; got {sorted(keys)}"
     )
-

@@ -9,9 +9,7 @@ EPSILON_0 = 8.8541878128e-12  # F/m
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
 
 
-def fresnel(
-    theta_i: ArrayLike, n2: ArrayLike, n1: float = 1.0
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def fresnel(theta_i: ArrayLike, n2: ArrayLike, n1: float = 1.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Power reflectances (R_s, R_p) at incidence angle `theta_i` (rad), eqs. (2) and (3).
 
     `n2` may be complex; a positive imaginary part absorbs. The transmitted normal wavenumber

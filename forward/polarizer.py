@@ -29,7 +29,7 @@ class Polarizer:
     angle: float | None = None
 
     @classmethod
-    def parse(cls, spec: object, key: str = "sensor.polarizer") -> "Polarizer":
+    def parse(cls, spec: object, key: str = "sensor.polarizer") -> Polarizer:
         """From "none" | "s" | "p" | an angle in rad."""
         if spec is None or spec == "none":
             return cls(None)
@@ -39,15 +39,16 @@ class Polarizer:
             return cls(np.pi / 2)
         if isinstance(spec, (int, float)) and not isinstance(spec, bool) and np.isfinite(spec):
             return cls(float(spec))
-        raise SceneError(f"{key}: must be \"none\", \"s\", \"p\" or an angle in rad, got {spec!r}")
+        raise SceneError(f'{key}: must be "none", "s", "p" or an angle in rad, got {spec!r}')
 
     def axis(self, view: NDArray[np.float64]) -> NDArray[np.float64]:
         """Transmission axis (unit, perpendicular to the line of sight `view`)."""
         e_s, e_p = sensor_axes(view)
         return np.cos(self.angle) * e_s + np.sin(self.angle) * e_p
 
-    def weights(self, normals: NDArray[np.float64], sun: NDArray[np.float64],
-                view: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def weights(
+        self, normals: NDArray[np.float64], sun: NDArray[np.float64], view: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(w_s, w_p) per facet: the seen reflectance is w_s R_s + w_p R_p; w_s + w_p = 1 without
         a polarizer and 1/2 with one (an ideal polarizer passes half of unpolarized light).
 

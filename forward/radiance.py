@@ -16,8 +16,9 @@ from forward.optics import fresnel
 from forward.scene import Sensor, Surface
 
 
-def facet_signal(normals: NDArray[np.float64], surface: Surface, sun: NDArray[np.float64],
-                 sensor: Sensor) -> NDArray[np.float64]:
+def facet_signal(
+    normals: NDArray[np.float64], surface: Surface, sun: NDArray[np.float64], sensor: Sensor
+) -> NDArray[np.float64]:
     """B(n_s; n_i, n_v) * weight for unit normals of shape (..., 3); result shape (...).
 
     weight = 1 for radiometry "paper" (eq. (22)); for "projected" it is the facet's area projected

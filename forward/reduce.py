@@ -23,8 +23,9 @@ symbols alike.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -124,14 +125,21 @@ class CompiledScene:
         lines = [f"scene compiled for rtol = {self.rtol:g} (relative to each surface's peak-to-peak):"]
         for s in self.surfaces:
             rel = s.error / s.ptp if s.ptp > 0 else 0.0
-            lines.append(f"  {s.name:<12} {s.kind:<10} coverage {s.weight:6.1%}  K={s.n_coords}  "
-                         f"est. error {rel:.1e} of p-p  {s.detail}")
+            lines.append(
+                f"  {s.name:<12} {s.kind:<10} coverage {s.weight:6.1%}  K={s.n_coords}  "
+                f"est. error {rel:.1e} of p-p  {s.detail}"
+            )
         return "\n".join(lines)
 
 
-def compile_scene(scene: Scene, t: NDArray[np.float64] | None = None, rtol: float = DEFAULT_RTOL,
-                  seed: int | np.random.SeedSequence | None = None, force: str | None = None,
-                  shape_cache: dict | None = None) -> CompiledScene:
+def compile_scene(
+    scene: Scene,
+    t: NDArray[np.float64] | None = None,
+    rtol: float = DEFAULT_RTOL,
+    seed: int | np.random.SeedSequence | None = None,
+    force: str | None = None,
+    shape_cache: dict | None = None,
+) -> CompiledScene:
     """Reduce `scene` on times `t` (default: its sampling) to the cheapest models meeting `rtol`.
 
     `force` = "dense" | "taylor2" | "chebyshev" overrides the choice (for tests and benchmarks).
@@ -154,8 +162,21 @@ def compile_scene(scene: Scene, t: NDArray[np.float64] | None = None, rtol: floa
         if motion is None:
             models.append(SurfaceModel(surface.name, "static", weight, None, value0=float(facet(0.0, 0.0))))
             continue
-        models.append(_compile_surface(surface.name, weight, motion, x[idx], y[idx], t, facet, rtol,
-                                       surface_derivatives(surface, scene, shape_cache), force, shape_cache))
+        models.append(
+            _compile_surface(
+                surface.name,
+                weight,
+                motion,
+                x[idx],
+                y[idx],
+                t,
+                facet,
+                rtol,
+                surface_derivatives(surface, scene, shape_cache),
+                force,
+                shape_cache,
+            )
+        )
     return CompiledScene(t, scene.sun.irradiance, models, rtol)
 
 
@@ -164,13 +185,17 @@ def surface_derivatives(surface: Surface, scene: Scene, cache: dict | None = Non
     kept in `cache` by optics, sun and sensor."""
     scale = _scale(surface, scene)
     facet = _facet_function(surface, scene.sun.direction, scene)
-    return _cached(cache, ("facet", surface.material, surface.lobe_width, scene.sun, scene.sensor, scale),
-                   lambda: facet_derivatives(facet, scale))
+    return _cached(
+        cache,
+        ("facet", surface.material, surface.lobe_width, scene.sun, scene.sensor, scale),
+        lambda: facet_derivatives(facet, scale),
+    )
 
 
 def _facet_function(surface: Surface, sun: NDArray[np.float64], scene: Scene) -> Callable:
     def facet(gx, gy):
         return facet_signal(normals_from_slopes(gx, gy), surface, sun, scene.sensor)
+
     return facet
 
 
@@ -207,8 +232,7 @@ def _compile_surface(name, weight, motion, x, y, t, facet, rtol, derivs, force, 
     # what float64 can resolve of X at all: a model within this is as good as the dense reference
     floor = _FLOAT64_FLOOR * abs(value0)
     meets = lambda m: m.error <= max(rtol * m.ptp, floor)
-    detail = (f"rigid: one facet stands for all {x.size} subpixels" if sx.shape[0] == 1
-              else f"{x.size} subpixels")
+    detail = f"rigid: one facet stands for all {x.size} subpixels" if sx.shape[0] == 1 else f"{x.size} subpixels"
     if force in (None, "taylor2"):
         model = _taylor2(name, weight, coords, sx, sy, w, derivs, value0)
         if force == "taylor2" or meets(model):
@@ -219,12 +243,14 @@ def _compile_surface(name, weight, motion, x, y, t, facet, rtol, derivs, force, 
         if force == "chebyshev" or meets(model):
             model.detail = f"{model.detail}; {detail}"
             return model
-    return _dense_model(name, weight, motion, x, y, t, facet,
-                        "no reduced model met rtol" if force is None else "forced")
+    return _dense_model(
+        name, weight, motion, x, y, t, facet, "no reduced model met rtol" if force is None else "forced"
+    )
 
 
-def modal_points(motion: ModalMotion, x: NDArray[np.float64], y: NDArray[np.float64], cache: dict | None = None
-                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def modal_points(
+    motion: ModalMotion, x: NDArray[np.float64], y: NDArray[np.float64], cache: dict | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """(sx, sy, w): slopes per unit modal coordinate at the distinct subpixels, shape (m, K) each,
     and their weights (m,). A rigid surface (one normal everywhere) collapses to m = 1."""
     shapes = _shapes(motion, x, y, cache)  # (K, 2, n)
@@ -237,8 +263,9 @@ def modal_points(motion: ModalMotion, x: NDArray[np.float64], y: NDArray[np.floa
     return uniq[:, 0::2], uniq[:, 1::2], counts / counts.sum()
 
 
-def taylor_coefficients(d: dict[tuple[int, int], float], sx: NDArray[np.float64], sy: NDArray[np.float64],
-                        w: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def taylor_coefficients(
+    d: dict[tuple[int, int], float], sx: NDArray[np.float64], sy: NDArray[np.float64], w: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(J, H) of X(q) = X0 + J q + q^T H q / 2 from the facet derivatives `d` at rest and the
     footprint moments of the modal slopes."""
     fx, fy = d[(1, 0)], d[(0, 1)]
@@ -287,9 +314,14 @@ def footprint_layout(scene: Scene, cache: dict | None = None) -> FootprintLayout
     return FootprintLayout(rest, moving)
 
 
-def taylor_surface_ac(motion: ModalMotion, x: NDArray[np.float64], y: NDArray[np.float64],
-                      derivs: dict[tuple[int, int], float], t: NDArray[np.float64], cache: dict | None = None
-                      ) -> NDArray[np.float64]:
+def taylor_surface_ac(
+    motion: ModalMotion,
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    derivs: dict[tuple[int, int], float],
+    t: NDArray[np.float64],
+    cache: dict | None = None,
+) -> NDArray[np.float64]:
     """J q(t) + q(t)^T H q(t) / 2 of one modal surface on its subpixels (x, y): the Taylor model's
     AC part (without coverage and irradiance), from the facet derivatives at rest and the motion's
     shapes (kept in `cache`) and coordinates."""
@@ -298,8 +330,15 @@ def taylor_surface_ac(motion: ModalMotion, x: NDArray[np.float64], y: NDArray[np
     return taylor_ac(jac, hess, motion.coefficients(t).T)
 
 
-def chebyshev_surface(surface: Surface, scene: Scene, x: NDArray[np.float64], y: NDArray[np.float64],
-                      box: NDArray[np.float64], rtol: float = DEFAULT_RTOL, cache: dict | None = None) -> SurfaceModel:
+def chebyshev_surface(
+    surface: Surface,
+    scene: Scene,
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    box: NDArray[np.float64],
+    rtol: float = DEFAULT_RTOL,
+    cache: dict | None = None,
+) -> SurfaceModel:
     """X(q) of one modal surface on its subpixels (x, y), interpolated on Chebyshev-Lobatto grids
     over the modal-coordinate box [-box, box] (1 or 2 coordinates): built once, it evaluates any
     coordinates inside the box (`SurfaceModel.evaluate`), e.g. for new amplitudes and phases of
@@ -308,8 +347,15 @@ def chebyshev_surface(surface: Surface, scene: Scene, x: NDArray[np.float64], y:
     sx, sy, w = modal_points(surface.motion, x, y, cache)
     value0 = float(facet(0.0, 0.0))
     corners = np.array([-np.asarray(box, dtype=float), np.asarray(box, dtype=float)])
-    return _chebyshev(surface.name, 1.0, corners, lambda q: _mean_facet(facet, sx, sy, w, q), rtol, value0,
-                      _FLOAT64_FLOOR * abs(value0))
+    return _chebyshev(
+        surface.name,
+        1.0,
+        corners,
+        lambda q: _mean_facet(facet, sx, sy, w, q),
+        rtol,
+        value0,
+        _FLOAT64_FLOOR * abs(value0),
+    )
 
 
 def _mean_facet(facet, sx, sy, w, q):
@@ -318,8 +364,8 @@ def _mean_facet(facet, sx, sy, w, q):
     out = np.empty(q.shape[0])
     step = max(1, _CHUNK // sx.shape[0])
     for a in range(0, q.shape[0], step):
-        qq = q[a:a + step]
-        out[a:a + step] = facet(qq @ sx.T, qq @ sy.T) @ w
+        qq = q[a : a + step]
+        out[a : a + step] = facet(qq @ sx.T, qq @ sy.T) @ w
     return out
 
 
@@ -328,15 +374,26 @@ def _dense_model(name, weight, motion, x, y, t, facet, why) -> SurfaceModel:
         out = np.empty(t.size)
         step = max(1, _CHUNK // x.size)
         for a in range(0, t.size, step):
-            gx, gy = motion.slopes(x, y, t[a:a + step])
-            out[a:a + step] = facet(gx, gy).mean(axis=1)
+            gx, gy = motion.slopes(x, y, t[a : a + step])
+            out[a : a + step] = facet(gx, gy).mean(axis=1)
         return out
+
     values = series()
-    return SurfaceModel(name, "dense", weight, None, 0.0, float(np.ptp(values)), float(facet(0.0, 0.0)),
-                        f"every subpixel, every sample ({why})", lambda: values)
+    return SurfaceModel(
+        name,
+        "dense",
+        weight,
+        None,
+        0.0,
+        float(np.ptp(values)),
+        float(facet(0.0, 0.0)),
+        f"every subpixel, every sample ({why})",
+        lambda: values,
+    )
 
 
 # ----------------------------------------------------------------------------- Taylor, 2nd order
+
 
 def facet_derivatives(facet: Callable, scale: float) -> dict[tuple[int, int], float]:
     """Partial derivatives d^(a+b) F / dgx^a dgy^b at g = 0 up to order 4.
@@ -373,8 +430,18 @@ def _taylor2(name, weight, coords, sx, sy, w, d, value0) -> SurfaceModel:
     ac = lambda *q: taylor_ac(jac, hess, q)
 
     series = ac(*coords.T)
-    return SurfaceModel(name, "taylor2", weight, coords, error, float(np.ptp(series)), value0,
-                        "X0 + J q + q'Hq/2", lambda *q: value0 + ac(*q), ac)
+    return SurfaceModel(
+        name,
+        "taylor2",
+        weight,
+        coords,
+        error,
+        float(np.ptp(series)),
+        value0,
+        "X0 + J q + q'Hq/2",
+        lambda *q: value0 + ac(*q),
+        ac,
+    )
 
 
 def _taylor2_error(d, coords, sx, sy, w) -> float:
@@ -387,12 +454,15 @@ def _taylor2_error(d, coords, sx, sy, w) -> float:
         corners = np.array(np.meshgrid(*([[-1.0, 0.0, 1.0]] * k), indexing="ij")).reshape(k, -1).T * qmax
         cubic = float(np.abs(_order_term(d, 3, corners @ sx.T, corners @ sy.T) @ w).max())
     else:
-        cubic = float(np.max(_order_term({key: abs(v) for key, v in d.items()}, 3, np.abs(sx) @ qmax, np.abs(sy) @ qmax)))
+        cubic = float(
+            np.max(_order_term({key: abs(v) for key, v in d.items()}, 3, np.abs(sx) @ qmax, np.abs(sy) @ qmax))
+        )
     quartic = float(np.max(_order_term({key: abs(v) for key, v in d.items()}, 4, np.abs(sx) @ qmax, np.abs(sy) @ qmax)))
     return cubic + quartic
 
 
 # ----------------------------------------------------------------------------- Chebyshev
+
 
 def _lobatto(level: int) -> NDArray[np.float64]:
     n = 2**level
@@ -452,6 +522,7 @@ def _chebyshev(name, weight, coords, mean_value, rtol, value0, floor) -> Surface
             if k == 1:
                 return _clenshaw(list(coef), u[0])
             return _clenshaw([_clenshaw(list(row), u[1]) for row in coef], u[0])
+
         return ev
 
     level, prev, error = 2, None, np.inf
@@ -470,8 +541,17 @@ def _chebyshev(name, weight, coords, mean_value, rtol, value0, floor) -> Surface
     ev = evaluator(coef)
     series = ev(*coords.T)
     n = 2**level + 1
-    return SurfaceModel(name, "chebyshev", weight, coords, error, float(np.ptp(series)), value0,
-                        f"{n}{'x' + str(n) if k == 2 else ''} Lobatto nodes", ev)
+    return SurfaceModel(
+        name,
+        "chebyshev",
+        weight,
+        coords,
+        error,
+        float(np.ptp(series)),
+        value0,
+        f"{n}{'x' + str(n) if k == 2 else ''} Lobatto nodes",
+        ev,
+    )
 
 
 def rigid_observation(scene: Scene, surface_name: str) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:

@@ -17,8 +17,9 @@ from forward.scene import Scene
 _CHUNK_ELEMENTS = 1 << 21  # facets per vectorized block (~16 MB per temporary)
 
 
-def pixel_signal(scene: Scene, t: ArrayLike | None = None, seed: int | np.random.SeedSequence | None = None
-                 ) -> NDArray[np.float64]:
+def pixel_signal(
+    scene: Scene, t: ArrayLike | None = None, seed: int | np.random.SeedSequence | None = None
+) -> NDArray[np.float64]:
     """Noise-free x(t) = (1/N) sum_k B_k w_k over the N footprint subpixels, eq. (22), times irradiance.
 
     `t` defaults to the scene's sampling times; `seed` fixes the realization of random motions
@@ -42,8 +43,8 @@ def pixel_signal(scene: Scene, t: ArrayLike | None = None, seed: int | np.random
         xs, ys = x[idx], y[idx]
         step = max(1, _CHUNK_ELEMENTS // idx.size)
         for a in range(0, t.size, step):
-            gx, gy = motion.slopes(xs, ys, t[a:a + step])
-            total[a:a + step] += facet_signal(normals_from_slopes(gx, gy), surface, sun, scene.sensor).sum(axis=1)
+            gx, gy = motion.slopes(xs, ys, t[a : a + step])
+            total[a : a + step] += facet_signal(normals_from_slopes(gx, gy), surface, sun, scene.sensor).sum(axis=1)
     return scene.sun.irradiance * total / x.size
 
 

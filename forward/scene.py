@@ -94,7 +94,7 @@ class Sampling:
 
     @property
     def n_samples(self) -> int:
-        return int(round(self.duration * self.fs))
+        return round(self.duration * self.fs)
 
     def times(self) -> NDArray[np.float64]:
         return self.start + np.arange(self.n_samples) / self.fs
@@ -122,14 +122,15 @@ class Scene:
     sampling: Sampling
     noise: Noise = field(default_factory=Noise)
 
-    def realize_motions(self, t: NDArray[np.float64], seed: int | np.random.SeedSequence | None
-                        ) -> list[Motion | None]:
+    def realize_motions(self, t: NDArray[np.float64], seed: int | np.random.SeedSequence | None) -> list[Motion | None]:
         """Each surface's motion realized on `t` (random motions draw here), one independent
         random stream per surface derived from `seed`."""
         root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
         streams = root.spawn(len(self.surfaces))
-        return [None if s.motion is None else s.motion.prepare(t, np.random.default_rng(st))
-                for s, st in zip(self.surfaces, streams)]
+        return [
+            None if s.motion is None else s.motion.prepare(t, np.random.default_rng(st))
+            for s, st in zip(self.surfaces, streams)
+        ]
 
     def owners(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.int64]:
         """Index into `surfaces` of the surface on top at each point; -1 = background."""

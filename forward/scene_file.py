@@ -81,8 +81,13 @@ def scene_from_table(data: dict[str, Any]) -> Scene:
     sampling = _sampling(top.table("sampling"))
     noise = _noise(top.table("noise", required=False))
     footprint = _footprint(top.table("footprint"))
-    background = _surface(top.table("background", required=False) or Table({}, "background"), "background",
-                          footprint.x, footprint.y, allow_motion=False)
+    background = _surface(
+        top.table("background", required=False) or Table({}, "background"),
+        "background",
+        footprint.x,
+        footprint.y,
+        allow_motion=False,
+    )
     surfaces_table = top.table("surfaces", required=False) or Table({}, "surfaces")
     surfaces = []
     for name in list(surfaces_table.data):
@@ -92,8 +97,10 @@ def scene_from_table(data: dict[str, Any]) -> Scene:
     top.done()
     for s in surfaces:
         if s.motion is not None and s.motion.max_frequency() >= sampling.fs / 2:
-            raise SceneError(f"surfaces.{s.name}.motion.frequency: {s.motion.max_frequency():g} Hz is at or above "
-                             f"the Nyquist frequency {sampling.fs / 2:g} Hz; allowed range (0, fs/2)")
+            raise SceneError(
+                f"surfaces.{s.name}.motion.frequency: {s.motion.max_frequency():g} Hz is at or above "
+                f"the Nyquist frequency {sampling.fs / 2:g} Hz; allowed range (0, fs/2)"
+            )
     return Scene(sun, sensor, footprint, tuple(surfaces), background, sampling, noise)
 
 
@@ -104,10 +111,14 @@ def _sun(t: Table) -> Sun:
             if t.has(clash):
                 raise SceneError(f"{t.path(clash)}: give the sun either by angles or by date and hour, not both")
         from forward.solar import sun_angles
-        elevation, azimuth = sun_angles(t.raw("date"), t.number("hour", lo=0.0, hi=24.0),
-                                        t.number("latitude", lo=-90.0, hi=90.0),
-                                        t.number("longitude", lo=-180.0, hi=180.0),
-                                        t.number("utc_offset", 0.0, lo=-14.0, hi=14.0))
+
+        elevation, azimuth = sun_angles(
+            t.raw("date"),
+            t.number("hour", lo=0.0, hi=24.0),
+            t.number("latitude", lo=-90.0, hi=90.0),
+            t.number("longitude", lo=-180.0, hi=180.0),
+            t.number("utc_offset", 0.0, lo=-14.0, hi=14.0),
+        )
     else:
         elevation, azimuth = t.number("inclination", **_INCLINATION), t.number("azimuth")
     sun = Sun(elevation, azimuth, t.number("irradiance", 1.0, **_POSITIVE))
@@ -116,9 +127,12 @@ def _sun(t: Table) -> Sun:
 
 
 def _sensor(t: Table) -> Sensor:
-    sensor = Sensor(t.number("inclination", **_INCLINATION), t.number("azimuth"),
-                    Polarizer.parse(t.raw("polarizer", "none"), t.path("polarizer")),
-                    t.choice("radiometry", "projected", ("projected", "paper")))
+    sensor = Sensor(
+        t.number("inclination", **_INCLINATION),
+        t.number("azimuth"),
+        Polarizer.parse(t.raw("polarizer", "none"), t.path("polarizer")),
+        t.choice("radiometry", "projected", ("projected", "paper")),
+    )
     t.done()
     return sensor
 
@@ -134,8 +148,12 @@ def _sampling(t: Table) -> Sampling:
 def _noise(t: Table | None) -> Noise:
     if t is None:
         return Noise()
-    n = Noise(t.number("sigma", 0.0, lo=0.0), t.number("photons_per_unit", 0.0, lo=0.0),
-              t.integer("adc_bits", 0, 0, 32), t.number("adc_full_scale", 0.0, lo=0.0))
+    n = Noise(
+        t.number("sigma", 0.0, lo=0.0),
+        t.number("photons_per_unit", 0.0, lo=0.0),
+        t.integer("adc_bits", 0, 0, 32),
+        t.number("adc_full_scale", 0.0, lo=0.0),
+    )
     t.done()
     return n
 

@@ -13,8 +13,9 @@ import math
 from forward.errors import SceneError
 
 
-def sun_angles(date: str, hour: float, latitude: float, longitude: float, utc_offset: float = 0.0
-               ) -> tuple[float, float]:
+def sun_angles(
+    date: str, hour: float, latitude: float, longitude: float, utc_offset: float = 0.0
+) -> tuple[float, float]:
     """(elevation, scene azimuth) in rad of the sun on `date` (YYYY-MM-DD) at `hour` local clock
     time (hours after midnight, UTC + `utc_offset` hours), at `latitude`, `longitude` (degrees,
     north and east positive). SceneError names `sun.hour` when the sun is below the horizon."""
@@ -31,6 +32,8 @@ def sun_angles(date: str, hour: float, latitude: float, longitude: float, utc_of
     elevation = math.radians(float(sp["apparent_elevation"].iloc[0]))
     azimuth = math.radians(float(sp["azimuth"].iloc[0]))
     if elevation <= 0.0:
-        raise SceneError(f"sun.hour: the sun is below the horizon at {hour:g} h on {day} "
-                         f"(elevation {elevation:.3f} rad); allowed: hours with the sun up")
+        raise SceneError(
+            f"sun.hour: the sun is below the horizon at {hour:g} h on {day} "
+            f"(elevation {elevation:.3f} rad); allowed: hours with the sun up"
+        )
     return elevation, math.remainder(math.pi / 2 - azimuth, 2 * math.pi)

@@ -7,8 +7,9 @@ import math
 from forward.errors import SceneError
 
 
-def number(value: object, key: str, lo: float = -math.inf, hi: float = math.inf,
-           lo_open: bool = False, hi_open: bool = False) -> float:
+def number(
+    value: object, key: str, lo: float = -math.inf, hi: float = math.inf, lo_open: bool = False, hi_open: bool = False
+) -> float:
     """`value` as a finite float in the interval [lo, hi] (ends open when asked), else SceneError."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise SceneError(f"{key}: must be a finite number, got {value!r}")
@@ -31,17 +32,30 @@ def integer(value: object, key: str, lo: int, hi: int) -> int:
 
 def interval(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False) -> str:
     """Human-readable interval, e.g. (0, pi/2]."""
+
     def fmt(v: float) -> str:
         for name, ref in (("pi/2", math.pi / 2), ("pi", math.pi), ("2 pi", 2 * math.pi)):
             if v == ref:
                 return name
         return "inf" if v == math.inf else "-inf" if v == -math.inf else f"{v:g}"
+
     return f"{'(' if lo_open else '['}{fmt(lo)}, {fmt(hi)}{')' if hi_open else ']'}"
 
 
-_FUNCTIONS = {"sqrt": math.sqrt, "sin": math.sin, "cos": math.cos, "tan": math.tan, "arcsin": math.asin,
-              "arccos": math.acos, "arctan": math.atan, "atan2": math.atan2, "radians": math.radians,
-              "exp": math.exp, "log": math.log, "log10": math.log10}
+_FUNCTIONS = {
+    "sqrt": math.sqrt,
+    "sin": math.sin,
+    "cos": math.cos,
+    "tan": math.tan,
+    "arcsin": math.asin,
+    "arccos": math.acos,
+    "arctan": math.atan,
+    "atan2": math.atan2,
+    "radians": math.radians,
+    "exp": math.exp,
+    "log": math.log,
+    "log10": math.log10,
+}
 _CONSTANTS = {"pi": math.pi, "e": math.e}
 
 
@@ -52,8 +66,15 @@ def expression(text: str, key: str) -> float:
     import ast
     import operator
 
-    ops = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
-           ast.Pow: operator.pow, ast.USub: operator.neg, ast.UAdd: operator.pos}
+    ops = {
+        ast.Add: operator.add,
+        ast.Sub: operator.sub,
+        ast.Mult: operator.mul,
+        ast.Div: operator.truediv,
+        ast.Pow: operator.pow,
+        ast.USub: operator.neg,
+        ast.UAdd: operator.pos,
+    }
 
     def ev(node: ast.AST) -> float:
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
@@ -64,8 +85,12 @@ def expression(text: str, key: str) -> float:
             return ops[type(node.op)](ev(node.left), ev(node.right))
         if isinstance(node, ast.UnaryOp) and type(node.op) in ops:
             return ops[type(node.op)](ev(node.operand))
-        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _FUNCTIONS
-                and not node.keywords):
+        if (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Name)
+            and node.func.id in _FUNCTIONS
+            and not node.keywords
+        ):
             return _FUNCTIONS[node.func.id](*(ev(a) for a in node.args))
         raise ValueError
 
@@ -100,8 +125,15 @@ class Table:
             raise SceneError(f"{self.path(name)}: missing (required)")
         return default
 
-    def number(self, name: str, default: object = _REQUIRED, lo: float = -math.inf, hi: float = math.inf,
-               lo_open: bool = False, hi_open: bool = False) -> float:
+    def number(
+        self,
+        name: str,
+        default: object = _REQUIRED,
+        lo: float = -math.inf,
+        hi: float = math.inf,
+        lo_open: bool = False,
+        hi_open: bool = False,
+    ) -> float:
         value = self.raw(name, default)
         if isinstance(value, str):
             value = expression(value, self.path(name))
@@ -134,7 +166,7 @@ class Table:
             raise SceneError(f"{key}: [{lo:g}, {hi:g}] has size {hi - lo:g}; the allowed range is size > 0 (min < max)")
         return lo, hi
 
-    def table(self, name: str, required: bool = True) -> "Table | None":
+    def table(self, name: str, required: bool = True) -> Table | None:
         value = self.raw(name, _REQUIRED if required else None)
         return None if value is None else Table(value, self.path(name))
 

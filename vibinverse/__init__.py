@@ -19,6 +19,26 @@ from vibinverse.models import SignalModel, register_model
 from vibinverse.priors import Prior
 from vibinverse.result import Detection, FitResult, read_result
 
-__all__ = ["DataError", "Detection", "FitResult", "InputError", "NumericalError", "Observation", "Prior", "SceneError",
-           "SignalModel", "Unsupported", "VibinverseError", "__version__", "design", "detect", "fit", "load_scene",
-           "load_series", "posterior", "read_result", "register_model", "simulate"]
+__all__ = [
+    "DataError",
+    "Detection",
+    "FitResult",
+    "InputError",
+    "NumericalError",
+    "Observation",
+    "Prior",
+    "SceneError",
+    "SignalModel",
+    "Unsupported",
+    "VibinverseError",
+    "__version__",
+    "design",
+    "detect",
+    "fit",
+    "load_scene",
+    "load_series",
+    "posterior",
+    "read_result",
+    "register_model",
+    "simulate",
+]

@@ -54,8 +54,14 @@ def _priors(free: Mapping[str, Prior | str] | None, table: dict[str, Any]) -> di
     return out or None
 
 
-def posterior(series: SeriesLike, scene: SceneLike, *, free: Mapping[str, Prior | str] | None = None,
-              model: str | None = None, overrides: Sequence[str] = ()) -> Posterior:
+def posterior(
+    series: SeriesLike,
+    scene: SceneLike,
+    *,
+    free: Mapping[str, Prior | str] | None = None,
+    model: str | None = None,
+    overrides: Sequence[str] = (),
+) -> Posterior:
     """The posterior of the free parameters (default: the scene's [infer] table, else the model's
     default priors) given `series`; `model` names a registered signal model (default: the one
     that describes the scene)."""
@@ -66,9 +72,21 @@ def posterior(series: SeriesLike, scene: SceneLike, *, free: Mapping[str, Prior 
         return Posterior(sm, _priors(free, table))
 
 
-def fit(series: SeriesLike, scene: SceneLike, *, method: str = "auto", free: Mapping[str, Prior | str] | None = None,
-        model: str | None = None, overrides: Sequence[str] = (), seed: int = 0, chain: str | Path | None = None,
-        resume: bool = False, workers: int = 1, max_steps: int = 20000, progress: bool = False) -> FitResult:
+def fit(
+    series: SeriesLike,
+    scene: SceneLike,
+    *,
+    method: str = "auto",
+    free: Mapping[str, Prior | str] | None = None,
+    model: str | None = None,
+    overrides: Sequence[str] = (),
+    seed: int = 0,
+    chain: str | Path | None = None,
+    resume: bool = False,
+    workers: int = 1,
+    max_steps: int = 20000,
+    progress: bool = False,
+) -> FitResult:
     """Fit a measured series against the scene that describes the observation.
 
     method: spectral | sindy | casadi | map | mcmc | auto (spectral -> SINDy -> casadi -> emcee,
@@ -80,13 +98,26 @@ def fit(series: SeriesLike, scene: SceneLike, *, method: str = "auto", free: Map
         raise InputError("workers and max_steps: must be >= 1")
     post = posterior(series, scene, free=free, model=model, overrides=overrides)
     with scene_errors():
-        return run(post, method, seed=seed, backend=Path(chain) if chain else None, resume=resume, workers=workers,
-                   max_steps=max_steps, progress=progress)
+        return run(
+            post,
+            method,
+            seed=seed,
+            backend=Path(chain) if chain else None,
+            resume=resume,
+            workers=workers,
+            max_steps=max_steps,
+            progress=progress,
+        )
 
 
-def detect(data: SeriesLike | FitResult, scene: SceneLike | None = None, *,
-           free: Mapping[str, Prior | str] | None = None, model: str | None = None,
-           overrides: Sequence[str] = ()) -> list[Detection]:
+def detect(
+    data: SeriesLike | FitResult,
+    scene: SceneLike | None = None,
+    *,
+    free: Mapping[str, Prior | str] | None = None,
+    model: str | None = None,
+    overrides: Sequence[str] = (),
+) -> list[Detection]:
     """Which lines the data show: the detection test of every line of the model (log-likelihood
     gain against a 5-sigma threshold with the look-elsewhere term) at the MAP, or of a fit's result."""
     if isinstance(data, FitResult):
@@ -96,8 +127,9 @@ def detect(data: SeriesLike | FitResult, scene: SceneLike | None = None, *,
     return fit(data, scene, method="casadi", free=free, model=model, overrides=overrides).detections
 
 
-def simulate(scene: SceneLike, *, seed: int | None = None, overrides: Sequence[str] = (),
-             rtol: float | None = DEFAULT_RTOL) -> Observation:
+def simulate(
+    scene: SceneLike, *, seed: int | None = None, overrides: Sequence[str] = (), rtol: float | None = DEFAULT_RTOL
+) -> Observation:
     """The pixel series of a scene (time, intensity, intensity_clean, sensitivity (21)); rtol=None
     evaluates every subpixel at every sample (the dense reference)."""
     if rtol is not None and not (rtol > 0 and rtol < float("inf")):
@@ -107,9 +139,16 @@ def simulate(scene: SceneLike, *, seed: int | None = None, overrides: Sequence[s
         return observe(scene_of(table), seed, rtol)
 
 
-def design(scene: SceneLike, *, vary: Sequence[str] = (), targets: Sequence[str] | None = None,
-           threshold: float = 1e-4, workers: int = 1, overrides: Sequence[str] = (),
-           progress: bool = False) -> dict[str, Any]:
+def design(
+    scene: SceneLike,
+    *,
+    vary: Sequence[str] = (),
+    targets: Sequence[str] | None = None,
+    threshold: float = 1e-4,
+    workers: int = 1,
+    overrides: Sequence[str] = (),
+    progress: bool = False,
+) -> dict[str, Any]:
     """Design of observation over a sweep (`KEY=start:stop:num` or `KEY=a,b,c` each): sensitivity,
     line SNR and Cramer-Rao sds per configuration, ranked. Returns {"axes", "targets", "rows",
     "best", "threshold", "seconds"} (`vibinverse.design.sweep.run_design`)."""

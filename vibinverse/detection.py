@@ -33,6 +33,11 @@ def line_detection(posterior: Posterior, values: dict[str, float]) -> dict[str, 
     for test in model.line_tests(values, posterior.space.names):
         gain = ll - model.log_likelihood({**values, **test.null})
         limit = threshold(posterior, test.frequency)
-        out.update({f"{test.label}_delta_loglike": float(gain), f"{test.label}_threshold": limit,
-                    f"{test.label}_detected": bool(gain > limit)})
+        out.update(
+            {
+                f"{test.label}_delta_loglike": float(gain),
+                f"{test.label}_threshold": limit,
+                f"{test.label}_detected": bool(gain > limit),
+            }
+        )
     return out

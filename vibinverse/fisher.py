@@ -32,8 +32,7 @@ def _step(values: dict[str, float], name: str, rel_step: float) -> float:
     return rel_step * max(abs(values[name]), 1e-3)
 
 
-def mean_fisher(like: FrameModel, values: dict[str, float], names: list[str],
-                rel_step: float = 1e-6) -> np.ndarray:
+def mean_fisher(like: FrameModel, values: dict[str, float], names: list[str], rel_step: float = 1e-6) -> np.ndarray:
     """Fisher information of `names` through the mean (the drive parameters enter only there)."""
     c = like.components(values)
     white = []
@@ -61,12 +60,12 @@ def spectrum_at(c: Components, omega: np.ndarray) -> np.ndarray:
     z = np.exp(-1j * np.asarray(omega, dtype=float))
     out = np.full(z.shape, c.r, dtype=float)
     for b in range(0, c.h.size, 2):
-        p, q, g = c.phi[b:b + 2, b:b + 2], c.q[b:b + 2, b:b + 2], c.h[b:b + 2]
+        p, q, g = c.phi[b : b + 2, b : b + 2], c.q[b : b + 2, b : b + 2], c.h[b : b + 2]
         m00, m01, m10, m11 = 1 - p[0, 0] * z, -p[0, 1] * z, -p[1, 0] * z, 1 - p[1, 1] * z
         det = m00 * m11 - m01 * m10
         u0 = (g[0] * m11 - g[1] * m10) / det  # u = g M^-1 (row vector)
         u1 = (g[1] * m00 - g[0] * m01) / det
-        out += (q[0, 0] * np.abs(u0) ** 2 + q[1, 1] * np.abs(u1) ** 2 + 2 * q[0, 1] * (u0 * u1.conj()).real)
+        out += q[0, 0] * np.abs(u0) ** 2 + q[1, 1] * np.abs(u1) ** 2 + 2 * q[0, 1] * (u0 * u1.conj()).real
     return out
 
 
@@ -81,8 +80,9 @@ def oversampling(c: Components, n: int, points_per_width: int = 4, limit: int = 
     return int(np.clip(np.ceil(points_per_width * 2 * np.pi / (n * width)), 1, limit))
 
 
-def covariance_fisher(like: FrameModel, values: dict[str, float], names: list[str],
-                      rel_step: float = 1e-6, oversample: int | None = None) -> np.ndarray:
+def covariance_fisher(
+    like: FrameModel, values: dict[str, float], names: list[str], rel_step: float = 1e-6, oversample: int | None = None
+) -> np.ndarray:
     """Whittle's Fisher information of `names` through the covariance, (T / 4 pi) times the
     integral of d_i log S d_j log S over the circle, scaled by the fraction of samples observed
     (gaps). The integral runs on a grid `oversample` times finer than the Fourier frequencies, so
@@ -101,8 +101,9 @@ def covariance_fisher(like: FrameModel, values: dict[str, float], names: list[st
     return 0.5 * observed * d @ d.T / oversample
 
 
-def covariance_fisher_dense(like: FrameModel, values: dict[str, float], names: list[str],
-                            rel_step: float = 1e-6) -> np.ndarray:
+def covariance_fisher_dense(
+    like: FrameModel, values: dict[str, float], names: list[str], rel_step: float = 1e-6
+) -> np.ndarray:
     """The exact covariance term tr(Sigma^-1 d_i Sigma Sigma^-1 d_j Sigma) / 2 from the explicit
     T x T covariance (O(T^3): an oracle for short series, not for design sweeps)."""
     n = like.t.size
@@ -120,8 +121,10 @@ def covariance_fisher_dense(like: FrameModel, values: dict[str, float], names: l
     a = []
     for name in names:
         h = _step(values, name, rel_step)
-        ds = (sigma(like.components({**values, name: values[name] + h}))
-              - sigma(like.components({**values, name: values[name] - h}))) / (2 * h)
+        ds = (
+            sigma(like.components({**values, name: values[name] + h}))
+            - sigma(like.components({**values, name: values[name] - h}))
+        ) / (2 * h)
         a.append(np.linalg.solve(base, ds))
     return 0.5 * np.array([[np.sum(ai * aj.T) for aj in a] for ai in a])
 
@@ -146,16 +149,16 @@ def crlb_from_fisher(fisher: np.ndarray, names: list[str]) -> dict[str, float]:
     return dict(zip(names, sd.tolist()))
 
 
-def crlb_sd(like: FrameModel, values: dict[str, float], names: list[str],
-            covariance: bool = False) -> dict[str, float]:
+def crlb_sd(like: FrameModel, values: dict[str, float], names: list[str], covariance: bool = False) -> dict[str, float]:
     """Cramer-Rao standard deviations of `names` (jointly estimated); with `covariance`, the
     information carried by the noise-driven resonances is counted too."""
     fisher = frame_fisher(like, values, names) if covariance else mean_fisher(like, values, names)
     return crlb_from_fisher(fisher, names)
 
 
-def response_fisher(like: DeterministicModel, values: dict[str, float], names: list[str],
-                    rel_step: float = 1e-6) -> np.ndarray:
+def response_fisher(
+    like: DeterministicModel, values: dict[str, float], names: list[str], rel_step: float = 1e-6
+) -> np.ndarray:
     """Fisher information of a deterministic scene's parameters (`DeterministicModel`): the mean
     term D^T diag(1/var) D over the observed samples, with D = d mu / d theta differenced on the
     AC part and the rest level separately (a 1e-12 signal keeps its digits), plus the variance

@@ -19,8 +19,10 @@ from scipy.linalg import expm, solve_discrete_lyapunov
 try:
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; this keeps the module importable
+
     def njit(*args, **kwargs):
         return (lambda f: f) if not (args and callable(args[0])) else args[0]
+
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -85,8 +87,14 @@ def _filter(y, phi, q, h, r, p0, white):  # pragma: no cover - compiled; checked
     return ll
 
 
-def log_likelihood(y: NDArray[np.float64], phi: NDArray[np.float64], q: NDArray[np.float64],
-                   h: NDArray[np.float64], r: float, p0: NDArray[np.float64]) -> float:
+def log_likelihood(
+    y: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    q: NDArray[np.float64],
+    h: NDArray[np.float64],
+    r: float,
+    p0: NDArray[np.float64],
+) -> float:
     """log p(y) for the model above; y may contain NaN gaps."""
     return float(_filter(*_args(y, phi, q, h, r, p0), np.empty(0)))
 
@@ -127,8 +135,9 @@ def stationary_covariance(phi: NDArray[np.float64], q: NDArray[np.float64]) -> N
     return 0.5 * (p + p.T)
 
 
-def discretize_continuous(a: NDArray[np.float64], g: NDArray[np.float64], qc: float, dt: float
-                          ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def discretize_continuous(
+    a: NDArray[np.float64], g: NDArray[np.float64], qc: float, dt: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(Phi, Q) of x' = A x + G w with continuous white noise w of intensity qc, step dt (Van Loan)."""
     n = a.shape[0]
     m = np.zeros((2 * n, 2 * n))

@@ -26,12 +26,23 @@ def check_priors(posterior: Posterior) -> None:
     for n, (lo, hi) in posterior.bounds.items():
         if n.split("[")[0].endswith("frequency"):
             if hi > nyq * (1 + 1e-12):
-                raise InputError(f"{n}: the prior reaches {hi:g} Hz, above the Nyquist frequency {nyq:g} Hz of the data")
+                raise InputError(
+                    f"{n}: the prior reaches {hi:g} Hz, above the Nyquist frequency {nyq:g} Hz of the data"
+                )
             check_resolves(series, max(lo, 1e-12), n)  # the lowest frequency needs the longest record
 
 
-def run(posterior: Posterior, method: str = "auto", *, seed: int = 0, backend: Path | None = None,
-        resume: bool = False, workers: int = 1, max_steps: int = 20000, progress: bool = True) -> FitResult:
+def run(
+    posterior: Posterior,
+    method: str = "auto",
+    *,
+    seed: int = 0,
+    backend: Path | None = None,
+    resume: bool = False,
+    workers: int = 1,
+    max_steps: int = 20000,
+    progress: bool = True,
+) -> FitResult:
     """Fit `posterior` by `method` (one of METHODS); the result's timing holds every stage's seconds."""
     if method not in METHODS:
         raise InputError(f"--method: {method!r} is not one of {', '.join(METHODS)}")
@@ -57,8 +68,16 @@ def run(posterior: Posterior, method: str = "auto", *, seed: int = 0, backend: P
     if method in ("map", "casadi"):
         best.timing = timing
         return best
-    result = Emcee().fit(posterior, best, backend=backend, resume=resume, workers=workers, seed=seed,
-                         max_steps=max_steps, progress=progress)
+    result = Emcee().fit(
+        posterior,
+        best,
+        backend=backend,
+        resume=resume,
+        workers=workers,
+        seed=seed,
+        max_steps=max_steps,
+        progress=progress,
+    )
     timing.update(result.timing)
     result.timing = timing
     result.method = "mcmc" if method == "mcmc" else "auto"
@@ -78,8 +97,9 @@ def map_stage(posterior: Posterior, start: FitResult, method: str, seed: int) ->
     if message:
         logger.info("%s", message)
         again = _map(posterior, result, method, seed)
-        again.timing = {k: again.timing.get(k, 0.0) + result.timing.get(k, 0.0)
-                        for k in {*again.timing, *result.timing}}
+        again.timing = {
+            k: again.timing.get(k, 0.0) + result.timing.get(k, 0.0) for k in {*again.timing, *result.timing}
+        }
         result = again
     if facts:
         result.data["model"] = {**result.data.get("model", {}), **posterior.model.describe(), **facts}
@@ -95,4 +115,3 @@ def _map(posterior: Posterior, start: FitResult, method: str, seed: int) -> FitR
         except (NumericalError, RuntimeError) as exc:  # any solver failure falls back, and says so
             logger.warning("casadi MAP failed (%s); using the derivative-free MAP", str(exc).splitlines()[0][:120])
     return ScipyMap().fit(posterior, start, seed=seed)
-

@@ -51,7 +51,7 @@ class Posterior:
         """True values of the free parameters when the data carry the scene (vibinverse simulate);
         a phase is wrapped into its prior's window by the period the data see."""
         if self.series.scene is None:
-            return {n: None for n in self.space.names}
+            return dict.fromkeys(self.space.names)
         table = self.model.truth_table(self.series.scene)
         out: dict[str, float | None] = {}
         for n, p in zip(self.space.names, self.space.priors):

@@ -99,8 +99,9 @@ def parse_prior(text: str, key: str) -> Prior:
     """'uniform(1, 5)', 'loguniform(1e-4, 1e-2)', 'normal(10, 0.1)', 'truncnormal(3, 1, 0, 10)'."""
     m = _PRIOR.match(text)
     if not m:
-        raise SceneError(f"{key}: prior {text!r} is not one of uniform(a,b), loguniform(a,b), normal(mu,sd), "
-                         "truncnormal(mu,sd,a,b)")
+        raise SceneError(
+            f"{key}: prior {text!r} is not one of uniform(a,b), loguniform(a,b), normal(mu,sd), truncnormal(mu,sd,a,b)"
+        )
     kind = m.group(1)
     with scene_errors():
         args = tuple(expression(a, key) for a in m.group(2).split(",")) if m.group(2).strip() else ()
@@ -121,7 +122,7 @@ def parse_free(items: list[str], infer: dict | None) -> dict[str, Prior]:
     free: dict[str, Prior] = {}
     table = (infer or {}).get("free", {})
     if not isinstance(table, dict):
-        raise SceneError("infer.free: must be a table of name = \"prior(...)\"")
+        raise SceneError('infer.free: must be a table of name = "prior(...)"')
     for name, text in table.items():
         free[name] = parse_prior(str(text), f"infer.free.{name}")
     for item in items:

@@ -91,8 +91,13 @@ class FitResult:
             params[n] = {k: (None if v is None else float(v)) for k, v in entry.items()}
             params[n]["prior"] = str(self.priors[j])
             params[n]["prior_bounds"] = [float(b) for b in self.priors[j].bounds]
-        return {"method": self.method, "parameters": params, "diagnostics": self.diagnostics, "timing": self.timing,
-                "data": self.data}
+        return {
+            "method": self.method,
+            "parameters": params,
+            "diagnostics": self.diagnostics,
+            "timing": self.timing,
+            "data": self.data,
+        }
 
     def to_inference_data(self) -> Any:
         """ArviZ InferenceData: posterior (chain = walker, draw; without a sampler one 'chain' of
@@ -100,11 +105,16 @@ class FitResult:
         bands), and the JSON summary in the observed data's attributes."""
         import arviz as az
 
-        chains = self.chains if self.chains is not None else (
-            None if self.approximate_draws is None else self.approximate_draws[None, ...])
+        chains = (
+            self.chains
+            if self.chains is not None
+            else (None if self.approximate_draws is None else self.approximate_draws[None, ...])
+        )
         posterior = None if chains is None else {_safe(n): chains[..., j] for j, n in enumerate(self.names)}
-        attrs = {"vibinverse_summary": json.dumps(self.summary()),
-                 "parameter_names": json.dumps({_safe(n): n for n in self.names})}
+        attrs = {
+            "vibinverse_summary": json.dumps(self.summary()),
+            "parameter_names": json.dumps({_safe(n): n for n in self.names}),
+        }
         series = self.series
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -114,8 +124,11 @@ class FitResult:
                 observed_data={"intensity": series.intensity},
                 constant_data={"time": series.time, **self.predictive},
                 coords={"time_index": np.arange(series.time.size)},
-                dims={"intensity": ["time_index"], "time": ["time_index"],
-                      **{k: ["time_index"] for k in self.predictive}},
+                dims={
+                    "intensity": ["time_index"],
+                    "time": ["time_index"],
+                    **{k: ["time_index"] for k in self.predictive},
+                },
                 attrs=attrs,
             )
 
@@ -135,8 +148,14 @@ def detections(diagnostics: dict[str, Any]) -> list[Detection]:
     for key, detected in diagnostics.items():
         if key.endswith("_detected"):
             what = key[: -len("_detected")]
-            out.append(Detection(what.replace("_", " "), diagnostics[f"{what}_delta_loglike"],
-                                 diagnostics.get(f"{what}_threshold", DETECTION_GAIN), bool(detected)))
+            out.append(
+                Detection(
+                    what.replace("_", " "),
+                    diagnostics[f"{what}_delta_loglike"],
+                    diagnostics.get(f"{what}_threshold", DETECTION_GAIN),
+                    bool(detected),
+                )
+            )
     return out
 
 
@@ -150,8 +169,9 @@ def read_result(path: str | Path) -> tuple[dict[str, Any], Any]:
             idata = az.from_netcdf(str(path), engine="h5netcdf")
         return json.loads(idata.observed_data.attrs["vibinverse_summary"]), idata
     except (OSError, ValueError, KeyError, AttributeError) as exc:
-        raise DataError(f"result: cannot read {path}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
-                        ) from None
+        raise DataError(
+            f"result: cannot read {path}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
+        ) from None
 
 
 def _safe(name: str) -> str:

@@ -67,7 +67,6 @@ def _split_index(part: str) -> tuple[str, int | None]:
     return part, None
 
 
-
 def is_number(v: Any) -> bool:
     if isinstance(v, bool):
         return False

@@ -44,7 +44,7 @@ def harmonics(t: np.ndarray, y: np.ndarray, f: float, nyq: float) -> tuple[tuple
 
 def _refine(freqs: np.ndarray, power: np.ndarray, i: int) -> float:
     if 0 < i < len(freqs) - 1:
-        a, b, c = np.log(power[i - 1:i + 2] + 1e-300)
+        a, b, c = np.log(power[i - 1 : i + 2] + 1e-300)
         den = a - 2 * b + c
         if den < 0:
             return float(freqs[i] + 0.5 * (a - c) / den * (freqs[1] - freqs[0]))
@@ -72,6 +72,8 @@ def line_candidates(series: Series, band: tuple[float, float], n_candidates: int
     scored = []
     for i in picked:
         f = _refine(freqs, power, i)
-        z = np.array([a * np.exp(1j * p) for a, p, _ in (sinusoid(t[quarter == j], y[quarter == j], f) for j in range(4))])
+        z = np.array(
+            [a * np.exp(1j * p) for a, p, _ in (sinusoid(t[quarter == j], y[quarter == j], f) for j in range(4))]
+        )
         scored.append((float(np.abs(z - z.mean()).max() / max(np.abs(z.mean()), 1e-300)), f))
     return [f for _, f in sorted(scored)]

@@ -9,5 +9,13 @@ from forward.motion.plate import PlateMotion, poisson_shape
 # here; the scene code has no special cases.
 MOTION_KINDS = {"plate": PlateMotion.from_table, "frame": FrameMotion.from_table, "rayleigh": RayleighMotion.from_table}
 
-__all__ = ["Motion", "ModalMotion", "PlateMotion", "FrameMotion", "FrameParameters", "RayleighMotion",
-           "poisson_shape", "MOTION_KINDS"]
+__all__ = [
+    "MOTION_KINDS",
+    "FrameMotion",
+    "FrameParameters",
+    "ModalMotion",
+    "Motion",
+    "PlateMotion",
+    "RayleighMotion",
+    "poisson_shape",
+]

@@ -18,11 +18,12 @@ class Motion(ABC):
     """A motion of a surface, seen through its slopes."""
 
     @abstractmethod
-    def slopes(self, x: NDArray[np.float64], y: NDArray[np.float64],
-               t: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def slopes(
+        self, x: NDArray[np.float64], y: NDArray[np.float64], t: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(h_x, h_y) at points (x, y) (shape (N,), m) and times t (shape (T,), s): shape (T, N) each."""
 
-    def prepare(self, t: NDArray[np.float64], rng: np.random.Generator) -> "Motion":
+    def prepare(self, t: NDArray[np.float64], rng: np.random.Generator) -> Motion:
         """The motion realized for one simulation on times `t`: random motions draw their
         realization here (once, so that chunked evaluation stays consistent); deterministic
         motions return themselves."""

@@ -21,7 +21,6 @@ dashpots.
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -93,7 +92,7 @@ class FrameParameters:
         return out
 
     @classmethod
-    def from_modal(cls, lx: float, ly: float, mass: float = 1.0, **modes: tuple[float, float]) -> "FrameParameters":
+    def from_modal(cls, lx: float, ly: float, mass: float = 1.0, **modes: tuple[float, float]) -> FrameParameters:
         """Physical parameters from (frequency Hz, damping ratio) of one vertical-type mode
         (`vertical` or `tilt`) and one lateral-type mode (`lateral` or `twist`).
 
@@ -103,7 +102,9 @@ class FrameParameters:
         vert = [k for k in ("vertical", "tilt") if k in modes]
         lat = [k for k in ("lateral", "twist") if k in modes]
         if len(vert) != 1 or len(lat) != 1 or len(modes) != 2:
-            raise SceneError("frame: give exactly one of vertical|tilt and one of lateral|twist (frequency, damping ratio)")
+            raise SceneError(
+                "frame: give exactly one of vertical|tilt and one of lateral|twist (frequency, damping ratio)"
+            )
         k1, b1 = _spring_from_mode(mass, *modes[vert[0]], 4.0 if vert[0] == "vertical" else 12.0, vert[0])
         k2, b2 = _spring_from_mode(mass, *modes[lat[0]], 4.0 if lat[0] == "lateral" else 12.0, lat[0])
         return cls(mass, lx, ly, k1, b1, k2, b2)
@@ -222,7 +223,7 @@ class Drive:
         """Complex base-displacement amplitudes (n_freq, 12): a(t) = Re(phasor e^{i w t})."""
         out = np.zeros((self.frequencies.size, 12), dtype=complex)
         amp = self.amplitudes * (np.exp(1j * self.phases) if self.phases is not None else 1.0)
-        out[:, 3 * self.corner:3 * self.corner + 3] = amp[:, None] * (self.d1 - 1j * self.d2)[None, :]
+        out[:, 3 * self.corner : 3 * self.corner + 3] = amp[:, None] * (self.d1 - 1j * self.d2)[None, :]
         return out
 
     def base(self, t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -233,8 +234,9 @@ class Drive:
         return (ph * e[:, None]).real.sum(0), (ph * (1j * w * e)[:, None]).real.sum(0)
 
 
-def steady_state(lin: LinearFrame, drive: Drive, t: NDArray[np.float64], coords=slice(None)
-                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def steady_state(
+    lin: LinearFrame, drive: Drive, t: NDArray[np.float64], coords=slice(None)
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Exact steady-state (q, q') of the linear model under the drive: shape (T, 6) each (or the
     selected `coords`), O(T n_freq)."""
     n = len(range(6)[coords])
@@ -265,8 +267,7 @@ def mode_zoh(k: float, c: float, m: float, dt: float) -> tuple[NDArray[np.float6
             wd = w * s
             e = math.exp(-zeta * w * dt)
             cs, sn = math.cos(wd * dt), math.sin(wd * dt)
-            phi = np.array([[e * (cs + zeta / s * sn), e * sn / wd],
-                            [-e * w * w * sn / wd, e * (cs - zeta / s * sn)]])
+            phi = np.array([[e * (cs + zeta / s * sn), e * sn / wd], [-e * w * w * sn / wd, e * (cs - zeta / s * sn)]])
             a_inv = np.array([[-2 * zeta / w, -1 / (w * w)], [1.0, 0.0]])
             return phi, a_inv @ ((phi - np.eye(2)) @ np.array([0.0, 1.0 / m]))
     aug = np.zeros((3, 3))
@@ -276,8 +277,9 @@ def mode_zoh(k: float, c: float, m: float, dt: float) -> tuple[NDArray[np.float6
     return e[:2, :2], e[:2, 2]
 
 
-def _propagate(phi: NDArray[np.float64], gam: NDArray[np.float64], g: NDArray[np.float64],
-               x0: NDArray[np.float64]) -> NDArray[np.float64]:
+def _propagate(
+    phi: NDArray[np.float64], gam: NDArray[np.float64], g: NDArray[np.float64], x0: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """x_k for x_{k+1} = Phi x_k + Gamma g_k, x_0 = x0, as second-order IIR filters (O(T), in C).
 
     Cayley-Hamilton: both the forced and the free response obey the recursion with denominator
@@ -291,14 +293,21 @@ def _propagate(phi: NDArray[np.float64], gam: NDArray[np.float64], g: NDArray[np
     impulse = np.zeros(n + 1)
     impulse[1] = 1.0
     s = lfilter([1.0], den, impulse)  # s[k] = s_k
-    free = np.outer(s[1:n + 1], phi @ x0) - det * np.outer(s[:n], x0)
+    free = np.outer(s[1 : n + 1], phi @ x0) - det * np.outer(s[:n], x0)
     free[0] = x0
     return forced + free
 
 
-def simulate_linear(params: FrameParameters, drive: Drive | None, noise_rms: float, fs: float, n: int,
-                    rng: np.random.Generator, start: float = 0.0,
-                    base_noise: NDArray[np.float64] | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def simulate_linear(
+    params: FrameParameters,
+    drive: Drive | None,
+    noise_rms: float,
+    fs: float,
+    n: int,
+    rng: np.random.Generator,
+    start: float = 0.0,
+    base_noise: NDArray[np.float64] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Generalized coordinates (q, q') (n, 6) at t = start + k/fs: exact steady-state drive response
     plus the exact ZOH response to white base noise, started from its stationary distribution.
 
@@ -328,12 +337,17 @@ def simulate_linear(params: FrameParameters, drive: Drive | None, noise_rms: flo
 
 # ---------------------------------------------------------------- nonlinear 6-DOF, quaternion attitude
 
+
 def quat_to_matrix(qt: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rotation matrix (body -> world) of a quaternion (w, x, y, z), normalized first."""
     w, x, y, z = qt / np.linalg.norm(qt)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def quat_from_rotation_vector(r: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -354,8 +368,9 @@ class NonlinearFrame:
         self.k = params.stiffness
         self.b = params.damping
 
-    def rhs(self, t: float, s: NDArray[np.float64], base: NDArray[np.float64],
-            base_rate: NDArray[np.float64]) -> NDArray[np.float64]:
+    def rhs(
+        self, t: float, s: NDArray[np.float64], base: NDArray[np.float64], base_rate: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
         """Time derivative; base (12,) and base_rate (12,) are the spring bases' displacement and velocity."""
         r, v, qt, om = s[:3], s[3:6], s[6:10], s[10:13]
         rot = quat_to_matrix(qt)
@@ -367,8 +382,9 @@ class NonlinearFrame:
         dom = (torque_body - _cross(om, self.inertia * om)) / self.inertia
         w, x, y, z = qt
         ox, oy, oz = om
-        dq = 0.5 * np.array([-x * ox - y * oy - z * oz, w * ox + y * oz - z * oy,
-                             w * oy + z * ox - x * oz, w * oz + x * oy - y * ox])
+        dq = 0.5 * np.array(
+            [-x * ox - y * oy - z * oz, w * ox + y * oz - z * oy, w * oy + z * ox - x * oz, w * oz + x * oy - y * ox]
+        )
         return np.concatenate([v, force.sum(0) / self.p.mass, dq, dom])
 
     def energy(self, s: NDArray[np.float64]) -> float:
@@ -378,10 +394,17 @@ class NonlinearFrame:
         disp = r + arm - self.corners
         return 0.5 * self.p.mass * v @ v + 0.5 * om @ (self.inertia * om) + 0.5 * np.sum(self.k * disp**2)
 
-    def simulate(self, t: NDArray[np.float64], s0: NDArray[np.float64], drive: Drive | None = None,
-                 base_noise: NDArray[np.float64] | None = None, rtol: float = 1e-10,
-                 atol: float = 1e-14) -> NDArray[np.float64]:
+    def simulate(
+        self,
+        t: NDArray[np.float64],
+        s0: NDArray[np.float64],
+        drive: Drive | None = None,
+        base_noise: NDArray[np.float64] | None = None,
+        rtol: float = 1e-10,
+        atol: float = 1e-14,
+    ) -> NDArray[np.float64]:
         """States at times t (uniform). Base noise (len(t), 12) is held constant over each sample."""
+
         def base(tt: float, k: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
             a, da = drive.base(tt) if drive is not None else (np.zeros(12), np.zeros(12))
             if base_noise is not None:
@@ -391,13 +414,21 @@ class NonlinearFrame:
         out = np.empty((t.size, 13))
         out[0] = s0
         if base_noise is None:
-            sol = solve_ivp(lambda tt, s: self.rhs(tt, s, *base(tt, 0)), (t[0], t[-1]), s0, method="DOP853",
-                            t_eval=t, rtol=rtol, atol=atol)
+            sol = solve_ivp(
+                lambda tt, s: self.rhs(tt, s, *base(tt, 0)),
+                (t[0], t[-1]),
+                s0,
+                method="DOP853",
+                t_eval=t,
+                rtol=rtol,
+                atol=atol,
+            )
             return sol.y.T
         s = np.asarray(s0, dtype=float)
         for k in range(t.size - 1):
-            sol = solve_ivp(lambda tt, y: self.rhs(tt, y, *base(tt, k)), (t[k], t[k + 1]), s, method="DOP853",
-                            rtol=rtol, atol=atol)
+            sol = solve_ivp(
+                lambda tt, y: self.rhs(tt, y, *base(tt, k)), (t[k], t[k + 1]), s, method="DOP853", rtol=rtol, atol=atol
+            )
             s = sol.y[:, -1]
             out[k + 1] = s
         return out
@@ -429,6 +460,7 @@ def slopes_of_attitude(states: NDArray[np.float64]) -> tuple[NDArray[np.float64]
 
 # ---------------------------------------------------------------- the scene's motion
 
+
 class TiltSeries(ModalMotion):
     """A rigid roof's realized slopes on a time grid, the same at every point of the roof: a modal
     motion whose two coordinates are the slopes (h_x, h_y) and whose shapes are uniform."""
@@ -450,8 +482,7 @@ class TiltSeries(ModalMotion):
 class FrameMotion(Motion):
     """The roof on its resonant frame; realized per simulation (the noise is random)."""
 
-    def __init__(self, params: FrameParameters, drive: Drive | None, noise_rms: float = 0.0,
-                 model: str = "linear"):
+    def __init__(self, params: FrameParameters, drive: Drive | None, noise_rms: float = 0.0, model: str = "linear"):
         self.params, self.drive, self.noise_rms, self.model = params, drive, float(noise_rms), model
 
     def max_frequency(self) -> float:
@@ -475,7 +506,7 @@ class FrameMotion(Motion):
         raise SceneError("frame motion: call prepare(t, rng) first (the scene does this)")
 
     @classmethod
-    def from_table(cls, t: Table, x_range: tuple[float, float], y_range: tuple[float, float]) -> "FrameMotion":
+    def from_table(cls, t: Table, x_range: tuple[float, float], y_range: tuple[float, float]) -> FrameMotion:
         """Scene table: mass; either k_vertical, b_vertical, k_lateral, b_lateral (physical) or
         {vertical|tilt}_frequency + _damping_ratio and {lateral|twist}_frequency + _damping_ratio
         (modal); drive_frequency, drive_amplitude, drive_phase (lists), drive_corner, drive_plane;
@@ -484,20 +515,33 @@ class FrameMotion(Motion):
         mass = t.number("mass", 1.0, lo=0.0, lo_open=True)
         physical = ("k_vertical", "b_vertical", "k_lateral", "b_lateral")
         if any(t.has(k) for k in physical):
-            params = FrameParameters(mass, lx, ly, t.number("k_vertical", lo=0.0, lo_open=True),
-                                     t.number("b_vertical", lo=0.0), t.number("k_lateral", lo=0.0, lo_open=True),
-                                     t.number("b_lateral", lo=0.0))
+            params = FrameParameters(
+                mass,
+                lx,
+                ly,
+                t.number("k_vertical", lo=0.0, lo_open=True),
+                t.number("b_vertical", lo=0.0),
+                t.number("k_lateral", lo=0.0, lo_open=True),
+                t.number("b_lateral", lo=0.0),
+            )
         else:
-            modes = {m: (t.number(f"{m}_frequency", lo=0.0, lo_open=True),
-                         t.number(f"{m}_damping_ratio", lo=0.0, hi=1.0, hi_open=True))
-                     for m in ("vertical", "tilt", "lateral", "twist") if t.has(f"{m}_frequency")}
+            modes = {
+                m: (
+                    t.number(f"{m}_frequency", lo=0.0, lo_open=True),
+                    t.number(f"{m}_damping_ratio", lo=0.0, hi=1.0, hi_open=True),
+                )
+                for m in ("vertical", "tilt", "lateral", "twist")
+                if t.has(f"{m}_frequency")
+            }
             params = FrameParameters.from_modal(lx, ly, mass, **modes)
         freqs = np.array(t.numbers("drive_frequency", [], lo=0.0, lo_open=True))
         amps = np.array(t.numbers("drive_amplitude", [], lo=0.0))
         phases = np.array(t.numbers("drive_phase", [0.0] * freqs.size))
         if freqs.size != amps.size or freqs.size != phases.size:
-            raise SceneError(f"{t.path('drive_amplitude')}: needs one amplitude per drive_frequency ({freqs.size}), "
-                             f"got {amps.size} amplitudes and {phases.size} phases")
+            raise SceneError(
+                f"{t.path('drive_amplitude')}: needs one amplitude per drive_frequency ({freqs.size}), "
+                f"got {amps.size} amplitudes and {phases.size} phases"
+            )
         corner = t.integer("drive_corner", 0, 0, 3)
         plane = t.raw("drive_plane", [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
         d1, d2 = _plane(plane, t.path("drive_plane"))

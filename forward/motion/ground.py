@@ -51,10 +51,25 @@ def green_2d_quadrature(r: float, t: float, k: float, omega: float) -> float:
     phase = k * r - omega * t
 
     def part(trig: str) -> float:
-        head = quad(lambda w: (np.cos if trig == "cos" else np.sin)(k * w) / np.sqrt(w + 2 * r), 0.0, a,
-                    weight="alg", wvar=(-0.5, 0.0), epsabs=0.0, epsrel=1e-13, limit=200)[0]
-        tail = quad(lambda w: 1.0 / np.sqrt((w + a) * (w + a + 2 * r)), 0.0, np.inf, weight=trig, wvar=k,
-                    epsabs=1e-15, limlst=200)[0]
+        head = quad(
+            lambda w: (np.cos if trig == "cos" else np.sin)(k * w) / np.sqrt(w + 2 * r),
+            0.0,
+            a,
+            weight="alg",
+            wvar=(-0.5, 0.0),
+            epsabs=0.0,
+            epsrel=1e-13,
+            limit=200,
+        )[0]
+        tail = quad(
+            lambda w: 1.0 / np.sqrt((w + a) * (w + a + 2 * r)),
+            0.0,
+            np.inf,
+            weight=trig,
+            wvar=k,
+            epsabs=1e-15,
+            limlst=200,
+        )[0]
         # shift the tail's oscillation back by k a = 2 pi: cos(k(w + a)) = cos(k w)
         return head + tail
 
@@ -75,9 +90,15 @@ class RayleighMotion(ModalMotion):
     frequencies (Hz), amplitudes A0 (m) at the piston, wave_speed v_R (m/s), phases (rad, default 0).
     """
 
-    def __init__(self, center: tuple[float, float], radius: float, wave_speed: float,
-                 frequencies: NDArray[np.float64], amplitudes: NDArray[np.float64],
-                 phases: NDArray[np.float64] | None = None):
+    def __init__(
+        self,
+        center: tuple[float, float],
+        radius: float,
+        wave_speed: float,
+        frequencies: NDArray[np.float64],
+        amplitudes: NDArray[np.float64],
+        phases: NDArray[np.float64] | None = None,
+    ):
         if not radius > 0:
             raise SceneError(f"rayleigh.radius: {radius:g} is outside the allowed range (0, inf)")
         if not wave_speed > 0:
@@ -87,11 +108,14 @@ class RayleighMotion(ModalMotion):
         self.wave_speed = float(wave_speed)
         self.frequencies = np.atleast_1d(np.asarray(frequencies, dtype=float))
         self.amplitudes = np.atleast_1d(np.asarray(amplitudes, dtype=float))
-        self.phases = (np.zeros(self.frequencies.size) if phases is None
-                       else np.atleast_1d(np.asarray(phases, dtype=float)))
+        self.phases = (
+            np.zeros(self.frequencies.size) if phases is None else np.atleast_1d(np.asarray(phases, dtype=float))
+        )
         if not (self.frequencies.size == self.amplitudes.size == self.phases.size):
-            raise SceneError(f"rayleigh: needs one amplitude and phase per frequency ({self.frequencies.size}), "
-                             f"got {self.amplitudes.size} and {self.phases.size}")
+            raise SceneError(
+                f"rayleigh: needs one amplitude and phase per frequency ({self.frequencies.size}), "
+                f"got {self.amplitudes.size} and {self.phases.size}"
+            )
         self.omega = 2 * np.pi * self.frequencies
         self.k = self.omega / self.wave_speed
         self.c_unit = np.array([continuity(self.radius, k, 1.0)[0] for k in self.k])  # C per unit A0
@@ -108,7 +132,9 @@ class RayleighMotion(ModalMotion):
         for k, w, c, a, ph in zip(self.k, self.omega, self.c, self.amplitudes, self.phases):
             phi = continuity(self.radius, k, a)[1]
             ts = t + ph / w
-            out = out + np.where(r < self.radius, a * np.cos(w * ts - phi), c * green_2d(np.maximum(r, self.radius), ts, k, w))
+            out = out + np.where(
+                r < self.radius, a * np.cos(w * ts - phi), c * green_2d(np.maximum(r, self.radius), ts, k, w)
+            )
         return out
 
     def radial_slope(self, r: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -148,7 +174,7 @@ class RayleighMotion(ModalMotion):
         return float(self.frequencies.max())
 
     @classmethod
-    def from_table(cls, t: Table, x_range: tuple[float, float], y_range: tuple[float, float]) -> "RayleighMotion":
+    def from_table(cls, t: Table, x_range: tuple[float, float], y_range: tuple[float, float]) -> RayleighMotion:
         """Scene table: center [x, y] (m), radius R (m), wave_speed v_R (m/s), frequency and
         amplitude, optional phase (numbers or equal-length lists; Hz, m, rad)."""
         center = t.numbers("center", [0.0, 0.0])
@@ -159,9 +185,10 @@ class RayleighMotion(ModalMotion):
         freqs = np.array(t.numbers("frequency", lo=0.0, lo_open=True))
         amps = np.array(t.numbers("amplitude", lo=0.0))
         if freqs.size == 0 or freqs.size != amps.size:
-            raise SceneError(f"{t.path('amplitude')}: needs one amplitude per frequency ({freqs.size}), got {amps.size}")
+            raise SceneError(
+                f"{t.path('amplitude')}: needs one amplitude per frequency ({freqs.size}), got {amps.size}"
+            )
         phases = np.array(t.numbers("phase", [0.0] * freqs.size))
         if phases.size != freqs.size:
             raise SceneError(f"{t.path('phase')}: needs one phase per frequency ({freqs.size}), got {phases.size}")
         return cls(center, radius, speed, freqs, amps, phases)
-

@@ -18,8 +18,9 @@ from forward.validation import Table
 _N_TERMS = 20000  # odd terms; slope truncation error on the edge itself <= 0.3 / N_TERMS of max|grad w|
 
 
-def poisson_shape(x: NDArray[np.float64], y: NDArray[np.float64], lx: float, ly: float,
-                  n_terms: int = _N_TERMS) -> tuple[NDArray[np.float64], ...]:
+def poisson_shape(
+    x: NDArray[np.float64], y: NDArray[np.float64], lx: float, ly: float, n_terms: int = _N_TERMS
+) -> tuple[NDArray[np.float64], ...]:
     """(w, w_x, w_y) for laplacian(w) = -1 on [0, lx] x [0, ly], w = 0 on the edge.
 
     Levy's single series, exact: w = x (a - x) / 2 - sum_{m odd} 4 a^2 / (pi m)^3 sin(k x)
@@ -49,7 +50,7 @@ def poisson_shape(x: NDArray[np.float64], y: NDArray[np.float64], lx: float, ly:
     ch = (e1 + e2) / den * coef
     sh = np.sign(uy - b / 2)[:, None] * (e1 - e2) / den * coef * k
     w = (ux * (a - ux) / 2)[:, None] - sin_x @ ch.T
-    wx = ((a / 2 - ux))[:, None] - cos_x @ ch.T
+    wx = (a / 2 - ux)[:, None] - cos_x @ ch.T
     wy = -(sin_x @ sh.T)
     return w[ix, iy], wx[ix, iy], wy[ix, iy]
 
@@ -74,8 +75,9 @@ class PlateMotion(ModalMotion):
     q (1/m) is the right-hand side of (8)/(10); use the constructors for the paper's cases.
     """
 
-    def __init__(self, x_range: tuple[float, float], y_range: tuple[float, float],
-                 frequency: float, q: float, phase: float = 0.0):
+    def __init__(
+        self, x_range: tuple[float, float], y_range: tuple[float, float], frequency: float, q: float, phase: float = 0.0
+    ):
         self.x0, self.x1 = map(float, x_range)
         self.y0, self.y1 = map(float, y_range)
         self.frequency = float(frequency)
@@ -88,8 +90,7 @@ class PlateMotion(ModalMotion):
         return pressure / (thickness * shear_modulus)
 
     @staticmethod
-    def q_boundary(frequency: float, density: float, boundary_amplitude: float,
-                   shear_modulus: float) -> float:
+    def q_boundary(frequency: float, density: float, boundary_amplitude: float, shear_modulus: float) -> float:
         """q = omega^2 rho A0 / G, eq. (10): the frame moves by A0 (m) at omega = 2 pi f."""
         return (2 * np.pi * frequency) ** 2 * density * boundary_amplitude / shear_modulus
 
@@ -123,35 +124,40 @@ class PlateMotion(ModalMotion):
         inside = (x >= self.x0) & (x <= self.x1) & (y >= self.y0) & (y <= self.y1)
         out = [np.zeros(x.shape) for _ in range(3)]
         if inside.any():
-            vals = poisson_shape(x[inside] - self.x0, y[inside] - self.y0,
-                                 self.x1 - self.x0, self.y1 - self.y0)
+            vals = poisson_shape(x[inside] - self.x0, y[inside] - self.y0, self.x1 - self.x0, self.y1 - self.y0)
             for o, v in zip(out, vals):
                 o[inside] = q * v
         return tuple(out)
 
     @classmethod
-    def from_table(cls, t: Table, x_range: tuple[float, float], y_range: tuple[float, float]) -> "PlateMotion":
+    def from_table(cls, t: Table, x_range: tuple[float, float], y_range: tuple[float, float]) -> PlateMotion:
         """From a scene table: frequency (Hz), phase (rad), and one amplitude group:
         center_deflection (m) | pressure (Pa), thickness (m), shear_modulus (Pa) [eq. (8)] |
         boundary_amplitude (m), density (kg/m^3), shear_modulus (Pa) [eq. (10)]."""
         f = t.number("frequency", lo=0.0, lo_open=True)
         phase = t.number("phase", 0.0)
-        groups = {"center_deflection": ("center_deflection",),
-                  "acoustic (8)": ("pressure", "thickness", "shear_modulus"),
-                  "boundary (10)": ("boundary_amplitude", "density", "shear_modulus")}
+        groups = {
+            "center_deflection": ("center_deflection",),
+            "acoustic (8)": ("pressure", "thickness", "shear_modulus"),
+            "boundary (10)": ("boundary_amplitude", "density", "shear_modulus"),
+        }
         given = {k for keys in groups.values() for k in keys if t.has(k)}
         present = [g for g, keys in groups.items() if set(keys) == given]
         if len(present) != 1:
-            raise SceneError(f"{t.key}: give exactly one amplitude: center_deflection | pressure, thickness, "
-                             f"shear_modulus | boundary_amplitude, density, shear_modulus")
+            raise SceneError(
+                f"{t.key}: give exactly one amplitude: center_deflection | pressure, thickness, "
+                f"shear_modulus | boundary_amplitude, density, shear_modulus"
+            )
         motion = cls(x_range, y_range, f, 0.0, phase)
         pos = {"lo": 0.0, "lo_open": True}
         if present[0] == "center_deflection":
             motion.q = motion.q_for_center_deflection(t.number("center_deflection", lo=0.0))
         elif present[0] == "acoustic (8)":
-            motion.q = cls.q_acoustic(t.number("pressure", lo=0.0), t.number("thickness", **pos),
-                                      t.number("shear_modulus", **pos))
+            motion.q = cls.q_acoustic(
+                t.number("pressure", lo=0.0), t.number("thickness", **pos), t.number("shear_modulus", **pos)
+            )
         else:
-            motion.q = cls.q_boundary(f, t.number("density", **pos), t.number("boundary_amplitude", lo=0.0),
-                                      t.number("shear_modulus", **pos))
+            motion.q = cls.q_boundary(
+                f, t.number("density", **pos), t.number("boundary_amplitude", lo=0.0), t.number("shear_modulus", **pos)
+            )
         return motion

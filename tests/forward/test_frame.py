@@ -4,8 +4,15 @@ import numpy as np
 import pytest
 
 from forward.errors import SceneError
-from forward.motion.frame import (Drive, FrameMotion, FrameParameters, NonlinearFrame, linearize,
-                                  simulate_linear, slopes_of_attitude)
+from forward.motion.frame import (
+    Drive,
+    FrameMotion,
+    FrameParameters,
+    NonlinearFrame,
+    linearize,
+    simulate_linear,
+    slopes_of_attitude,
+)
 from forward.render import pixel_signal
 
 PAPER = FrameParameters(1.0, 50.0, 50.0, (2 * np.pi) ** 2, 0.05, 4 * (2 * np.pi) ** 2, 0.05)
@@ -43,7 +50,7 @@ def test_modal_and_physical_parameters_convert_both_ways():
 
 @pytest.mark.parametrize("field, value", [("mass", -1.0), ("k1", 0.0), ("k2", -5.0), ("b1", -0.1)])
 def test_invalid_physical_parameters(field, value):
-    kwargs = dict(mass=1.0, lx=50.0, ly=50.0, k1=1.0, b1=0.05, k2=1.0, b2=0.05)
+    kwargs = {"mass": 1.0, "lx": 50.0, "ly": 50.0, "k1": 1.0, "b1": 0.05, "k2": 1.0, "b2": 0.05}
     kwargs[field] = value
     with pytest.raises(SceneError, match=f"frame.{field}"):
         FrameParameters(**kwargs)
@@ -97,7 +104,9 @@ def test_extreme_damping_ratios_are_finite_and_stationary(zeta):
     lin = linearize(params)
     # stationary variance of a ZOH-driven oscillator, against the simulation (started stationary)
     from scipy.linalg import solve_discrete_lyapunov
+
     from forward.motion.frame import mode_zoh
+
     phi, gam = mode_zoh(lin.stiffness[3], lin.damping[3], lin.mass[3], 1 / 200.0)
     var_g = 1e-8 * lin.force_spring[3] @ lin.force_spring[3]
     p = solve_discrete_lyapunov(phi, var_g * np.outer(gam, gam))
@@ -130,6 +139,7 @@ def test_frame_needs_uniform_times():
 
 def test_sec_4_2_signal_has_lines_at_tilt_resonance_and_drive(scene):
     from scipy.signal import periodogram
+
     s = scene("roof_frame")
     x = pixel_signal(s, seed=5)
     f, p = periodogram(x - x.mean(), s.sampling.fs)
@@ -149,19 +159,28 @@ def test_seeded_frame_signal_is_reproducible(scene):
 
 def test_nonlinear_model_runs_in_a_scene(scene):
     lin = pixel_signal(scene("roof_frame", "sampling.duration=1", "surfaces.roof.motion.noise_rms=0"))
-    nonlin = pixel_signal(scene("roof_frame", "sampling.duration=1", "surfaces.roof.motion.noise_rms=0",
-                                "surfaces.roof.motion.model='nonlinear'"))
+    nonlin = pixel_signal(
+        scene(
+            "roof_frame",
+            "sampling.duration=1",
+            "surfaces.roof.motion.noise_rms=0",
+            "surfaces.roof.motion.model='nonlinear'",
+        )
+    )
     ac = lin - lin.mean()
     assert np.abs(nonlin - lin).max() < 0.01 * np.abs(ac).max()
 
 
-@pytest.mark.parametrize("override, message", [
-    ("surfaces.roof.motion.mass=-1", "mass"),
-    ("surfaces.roof.motion.k_vertical=-3", "k_vertical"),
-    ("surfaces.roof.motion.drive_frequency=[100.0]", "Nyquist"),
-    ("surfaces.roof.motion.drive_amplitude=[1e-3, 1e-3]", "one amplitude per drive_frequency"),
-    ("surfaces.roof.motion.drive_plane=[[1,0,0],[1,0,0]]", "perpendicular"),
-])
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("surfaces.roof.motion.mass=-1", "mass"),
+        ("surfaces.roof.motion.k_vertical=-3", "k_vertical"),
+        ("surfaces.roof.motion.drive_frequency=[100.0]", "Nyquist"),
+        ("surfaces.roof.motion.drive_amplitude=[1e-3, 1e-3]", "one amplitude per drive_frequency"),
+        ("surfaces.roof.motion.drive_plane=[[1,0,0],[1,0,0]]", "perpendicular"),
+    ],
+)
 def test_invalid_frame_scenes(scene, override, message):
     with pytest.raises(SceneError, match=message):
         scene("roof_frame", override)

@@ -45,8 +45,12 @@ def test_slopes_are_the_gradient_of_the_displacement_and_superpose(phases):
     u = lambda xx, yy: m.displacement(np.hypot(xx - 3.0, yy + 2.0)[None, :], t[:, None])
     np.testing.assert_allclose(gx, (u(x + h, y) - u(x - h, y)) / (2 * h), rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(gy, (u(x, y + h) - u(x, y - h)) / (2 * h), rtol=1e-6, atol=1e-12)
-    one = [RayleighMotion((3.0, -2.0), 5.0, 3000.0, np.array([f]), np.array([a]), None if phases is None else phases[i:i + 1])
-           for i, (f, a) in enumerate(lines)]
+    one = [
+        RayleighMotion(
+            (3.0, -2.0), 5.0, 3000.0, np.array([f]), np.array([a]), None if phases is None else phases[i : i + 1]
+        )
+        for i, (f, a) in enumerate(lines)
+    ]
     np.testing.assert_allclose(gx, one[0].slopes(x, y, t)[0] + one[1].slopes(x, y, t)[0], rtol=1e-12)
 
 
@@ -55,10 +59,11 @@ def test_a_source_phase_is_a_time_shift():
     x, y = np.array([10.0, 30.0, -20.0]), np.array([4.0, -25.0, 7.0])
     t = np.array([0.0, 0.004, 0.013])
     for i in range(2):  # phase p at t is no phase at t + p / omega
-        shifted = RayleighMotion((3.0, -2.0), 5.0, 3000.0, f[i:i + 1], np.array([1.0]), ph[i:i + 1])
-        plain = RayleighMotion((3.0, -2.0), 5.0, 3000.0, f[i:i + 1], np.array([1.0]))
-        np.testing.assert_allclose(shifted.slopes(x, y, t)[0], plain.slopes(x, y, t + ph[i] / (2 * np.pi * f[i]))[0],
-                                   rtol=1e-9, atol=1e-15)
+        shifted = RayleighMotion((3.0, -2.0), 5.0, 3000.0, f[i : i + 1], np.array([1.0]), ph[i : i + 1])
+        plain = RayleighMotion((3.0, -2.0), 5.0, 3000.0, f[i : i + 1], np.array([1.0]))
+        np.testing.assert_allclose(
+            shifted.slopes(x, y, t)[0], plain.slopes(x, y, t + ph[i] / (2 * np.pi * f[i]))[0], rtol=1e-9, atol=1e-15
+        )
     with pytest.raises(SceneError, match="phase"):
         RayleighMotion((0.0, 0.0), 5.0, 3000.0, f, np.array([1e-3, 4e-4]), np.array([0.1]))
 

@@ -4,7 +4,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from forward.materials import LIBRARY
-from forward.optics import brewster_angle, fresnel, index_from_conductivity, reflectance, EPSILON_0, SPEED_OF_LIGHT
+from forward.optics import EPSILON_0, SPEED_OF_LIGHT, brewster_angle, fresnel, index_from_conductivity, reflectance
 
 
 @pytest.mark.parametrize("n", [1.33, 1.5, 1.5185, 2.4, 0.96 + 6.69j, 2.92 + 3.35j])

@@ -32,7 +32,7 @@ def test_analytic_gradient_matches_finite_differences():
     rng = np.random.default_rng(0)
     x, y = rng.uniform(0.05, 1.95, 20), rng.uniform(0.05, 4.95, 20)
     h = 1e-5
-    w, gx, gy = poisson_shape(x, y, 2.0, 5.0)
+    _w, gx, gy = poisson_shape(x, y, 2.0, 5.0)
     fx = (poisson_shape(x + h, y, 2.0, 5.0)[0] - poisson_shape(x - h, y, 2.0, 5.0)[0]) / (2 * h)
     fy = (poisson_shape(x, y + h, 2.0, 5.0)[0] - poisson_shape(x, y - h, 2.0, 5.0)[0]) / (2 * h)
     np.testing.assert_allclose(gx, fx, atol=1e-9)

@@ -17,9 +17,15 @@ def rel_error(fast, ref):
     return np.abs(fast - ref).max() / np.ptp(ref)
 
 
-@pytest.mark.parametrize("name, expected_kind", [
-    ("roof_elastic", "chebyshev"), ("glass_brewster", "chebyshev"), ("roof_frame", "taylor2"),
-    ("ground_rayleigh", "taylor2")])
+@pytest.mark.parametrize(
+    "name, expected_kind",
+    [
+        ("roof_elastic", "chebyshev"),
+        ("glass_brewster", "chebyshev"),
+        ("roof_frame", "taylor2"),
+        ("ground_rayleigh", "taylor2"),
+    ],
+)
 def test_example_scenes_meet_rtol(scene, name, expected_kind):
     s = scene(name, *SMALL) if name != "roof_frame" else scene(name, "sampling.duration=2")
     ref = pixel_signal(s, seed=4)
@@ -68,8 +74,10 @@ def test_taylor_ac_part_survives_amplitudes_below_float64_resolution(scene):
     np.testing.assert_allclose(ac_tiny, 1e-6 * ac_big, rtol=1e-5, atol=1e-5 * np.abs(ac_tiny).max())
 
 
-@pytest.mark.parametrize("name, overrides", [("roof_elastic", ()), ("ground_rayleigh", ()),
-                                              ("roof_elastic", ("surfaces.roof.motion.center_deflection=0.05",))])
+@pytest.mark.parametrize(
+    "name, overrides",
+    [("roof_elastic", ()), ("ground_rayleigh", ()), ("roof_elastic", ("surfaces.roof.motion.center_deflection=0.05",))],
+)
 def test_reduced_observation_works_with_casadi_symbols(scene, name, overrides):
     c = compile_scene(scene(name, *SMALL, *overrides))
     surf = c.moving()[0]
@@ -80,7 +88,10 @@ def test_reduced_observation_works_with_casadi_symbols(scene, name, overrides):
         assert float(f(row)) == pytest.approx(float(c.observation([tuple(row)])), rel=1e-13)
     # exact derivatives agree with a central difference of the numpy evaluation
     row, h = surf.coords[5], 1e-6 * max(1.0, np.abs(surf.coords).max())
-    fd = (c.observation([tuple(row + h * np.eye(surf.n_coords)[0])]) - c.observation([tuple(row - h * np.eye(surf.n_coords)[0])])) / (2 * h)
+    fd = (
+        c.observation([tuple(row + h * np.eye(surf.n_coords)[0])])
+        - c.observation([tuple(row - h * np.eye(surf.n_coords)[0])])
+    ) / (2 * h)
     assert float(j(row)[0]) == pytest.approx(fd, rel=1e-5)
 
 
@@ -98,23 +109,38 @@ def test_explain_names_each_surface_and_its_error(scene):
 
 def random_scene(sun_inc, view_off, az_off, material, lobe, amp, freq, fx, fy, size):
     mat = {"steel": "steel", "glass": "glass", "aluminium": "aluminium", "ground": {"albedo": 0.4}}[material]
-    surface = {"x": [-size, size], "y": [-size, size], "material": mat,
-               "motion": {"kind": "plate", "frequency": freq, "center_deflection": amp}}
+    surface = {
+        "x": [-size, size],
+        "y": [-size, size],
+        "material": mat,
+        "motion": {"kind": "plate", "frequency": freq, "center_deflection": amp},
+    }
     if material != "ground":
         surface["lobe_width"] = lobe
-    return scene_from_table({
-        "sun": {"inclination": sun_inc, "azimuth": np.pi},
-        "sensor": {"inclination": min(np.pi / 2, sun_inc + view_off), "azimuth": az_off},
-        "sampling": {"fs": 400.0, "duration": 0.1},
-        "footprint": {"x": [fx * size, fx * size + size], "y": [fy * size, fy * size + size], "resolution": 14},
-        "surfaces": {"s": surface}})
+    return scene_from_table(
+        {
+            "sun": {"inclination": sun_inc, "azimuth": np.pi},
+            "sensor": {"inclination": min(np.pi / 2, sun_inc + view_off), "azimuth": az_off},
+            "sampling": {"fs": 400.0, "duration": 0.1},
+            "footprint": {"x": [fx * size, fx * size + size], "y": [fy * size, fy * size + size], "resolution": 14},
+            "surfaces": {"s": surface},
+        }
+    )
 
 
 @settings(max_examples=25, deadline=None)
-@given(sun_inc=st.floats(0.05, 1.5), view_off=st.floats(-0.03, 0.03), az_off=st.floats(-0.02, 0.02),
-       material=st.sampled_from(["steel", "glass", "aluminium", "ground"]), lobe=st.floats(0.005, 0.05),
-       amp=st.floats(1e-7, 1e-2), freq=st.floats(5.0, 150.0), fx=st.floats(-1.0, 0.0), fy=st.floats(-1.0, 0.0),
-       size=st.floats(1.0, 50.0))
+@given(
+    sun_inc=st.floats(0.05, 1.5),
+    view_off=st.floats(-0.03, 0.03),
+    az_off=st.floats(-0.02, 0.02),
+    material=st.sampled_from(["steel", "glass", "aluminium", "ground"]),
+    lobe=st.floats(0.005, 0.05),
+    amp=st.floats(1e-7, 1e-2),
+    freq=st.floats(5.0, 150.0),
+    fx=st.floats(-1.0, 0.0),
+    fy=st.floats(-1.0, 0.0),
+    size=st.floats(1.0, 50.0),
+)
 def test_fast_matches_dense_on_random_scenes(sun_inc, view_off, az_off, material, lobe, amp, freq, fx, fy, size):
     s = random_scene(sun_inc, view_off, az_off, material, lobe, amp, freq, fx, fy, size)
     ref = pixel_signal(s)

@@ -24,24 +24,27 @@ def test_example_scenes_load_with_the_papers_geometry():
     assert math.pi / 2 - g.sun.inclination == pytest.approx(math.atan(g.surfaces[0].material.index.real), abs=1e-12)
 
 
-@pytest.mark.parametrize("override, message", [
-    ("sensr.inclination=1", "sensr: unknown key"),
-    ("surfaces.roof.colour=1", "surfaces.roof.colour: unknown key"),
-    ("footprint.x=[5, -5]", "footprint.x: .*size > 0"),
-    ("surfaces.roof.x=[1, 1]", "surfaces.roof.x: .*size > 0"),
-    ("sun.inclination=0", r"sun.inclination: .*\(0, pi/2\]"),
-    ("sensor.inclination=1.7", r"sensor.inclination: .*\(0, pi/2\]"),
-    ("surfaces.roof.lobe_width=0", r"surfaces.roof.lobe_width: .*\(0, 0.5\]"),
-    ("surfaces.roof.lobe_width=-0.01", r"surfaces.roof.lobe_width: .*\(0, 0.5\]"),
-    ("sun.azimuth=nan", "sun.azimuth: must be a finite number"),
-    ("sampling.fs='fast'", "sampling.fs: 'fast' is not a number"),
-    ("surfaces.roof.motion.frequency=600", "Nyquist"),
-    ("surfaces.roof.material='wood'", "unknown material 'wood'"),
-    ("sensor.polarizer='q'", "sensor.polarizer"),
-    ("footprint.resolution=0", r"footprint.resolution: .*\[1, 4096\]"),
-    ("surfaces.roof.motion.pressure=20", "exactly one amplitude"),
-    ("sampling.duration=1e-9", "samples"),
-])
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("sensr.inclination=1", "sensr: unknown key"),
+        ("surfaces.roof.colour=1", "surfaces.roof.colour: unknown key"),
+        ("footprint.x=[5, -5]", "footprint.x: .*size > 0"),
+        ("surfaces.roof.x=[1, 1]", "surfaces.roof.x: .*size > 0"),
+        ("sun.inclination=0", r"sun.inclination: .*\(0, pi/2\]"),
+        ("sensor.inclination=1.7", r"sensor.inclination: .*\(0, pi/2\]"),
+        ("surfaces.roof.lobe_width=0", r"surfaces.roof.lobe_width: .*\(0, 0.5\]"),
+        ("surfaces.roof.lobe_width=-0.01", r"surfaces.roof.lobe_width: .*\(0, 0.5\]"),
+        ("sun.azimuth=nan", "sun.azimuth: must be a finite number"),
+        ("sampling.fs='fast'", "sampling.fs: 'fast' is not a number"),
+        ("surfaces.roof.motion.frequency=600", "Nyquist"),
+        ("surfaces.roof.material='wood'", "unknown material 'wood'"),
+        ("sensor.polarizer='q'", "sensor.polarizer"),
+        ("footprint.resolution=0", r"footprint.resolution: .*\[1, 4096\]"),
+        ("surfaces.roof.motion.pressure=20", "exactly one amplitude"),
+        ("sampling.duration=1e-9", "samples"),
+    ],
+)
 def test_bad_values_name_the_key_and_the_allowed_range(override, message):
     with pytest.raises(SceneError, match=message) as err:
         load_scene(SCENES / "roof_elastic.toml", [override])

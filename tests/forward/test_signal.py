@@ -45,8 +45,14 @@ def test_flat_specular_roof_matches_the_closed_form(scene):
     theta_i = np.pi / 6
     expected = np.cos(theta_i) * reflectance(theta_i, LIBRARY["steel"].index) * lobe_normalization(0.01, theta_i)
     np.testing.assert_allclose(pixel_signal(s), expected / np.sin(np.pi / 3), rtol=1e-12)
-    paper = scene("roof_elastic", *FAST, *CENTERED, "sensor.inclination='pi/3'", "sensor.radiometry='paper'",
-                  "surfaces.roof.motion.center_deflection=0")
+    paper = scene(
+        "roof_elastic",
+        *FAST,
+        *CENTERED,
+        "sensor.inclination='pi/3'",
+        "sensor.radiometry='paper'",
+        "surfaces.roof.motion.center_deflection=0",
+    )
     np.testing.assert_allclose(pixel_signal(paper), expected / np.cos(theta_i), rtol=1e-12)  # eq. (23) as printed
 
 
@@ -64,8 +70,10 @@ def test_radiometry_options_differ_at_first_order_in_tilt(scene):
 
 
 def test_sensitivity_is_linear_in_small_amplitudes_down_to_1e_9(scene):
-    s = [sensitivity(pixel_signal(scene("roof_elastic", *FAST, f"surfaces.roof.motion.center_deflection={a}")))
-         for a in (1e-9, 1e-7, 1e-5)]
+    s = [
+        sensitivity(pixel_signal(scene("roof_elastic", *FAST, f"surfaces.roof.motion.center_deflection={a}")))
+        for a in (1e-9, 1e-7, 1e-5)
+    ]
     assert s[1] / s[0] == pytest.approx(100.0, rel=0.02)
     assert s[2] / s[1] == pytest.approx(100.0, rel=0.02)
 
@@ -75,11 +83,14 @@ def test_large_amplitude_saturates_below_one(scene):
     assert 0.5 < s < 1.0
 
 
-@pytest.mark.parametrize("overrides", [
-    ("sun.inclination=0.01", "sensor.inclination=0.01"),  # grazing sun, grazing view on the lobe
-    ("sensor.inclination='pi/3 + 0.05'",),  # far out on the lobe edge
-    ("sun.inclination='pi/2'", "sensor.inclination='pi/2'"),  # overhead: normal incidence
-])
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ("sun.inclination=0.01", "sensor.inclination=0.01"),  # grazing sun, grazing view on the lobe
+        ("sensor.inclination='pi/3 + 0.05'",),  # far out on the lobe edge
+        ("sun.inclination='pi/2'", "sensor.inclination='pi/2'"),  # overhead: normal incidence
+    ],
+)
 def test_hard_geometries_give_finite_signals(scene, overrides):
     x = pixel_signal(scene("roof_elastic", *FAST, *overrides))
     assert np.all(np.isfinite(x)) and np.all(x > 0)

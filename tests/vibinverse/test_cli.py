@@ -49,15 +49,18 @@ def test_seed_reproduces_and_set_overrides(tmp_path):
     assert np.fft.rfftfreq(data.shape[0], 1e-3)[spec.argmax()] == pytest.approx(25.0, abs=10.0)
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--set", "sensr.inclination=1"], "sensr: unknown key"),
-    (["--set", "surfaces.roof.x=[25, -25]"], "surfaces.roof.x"),
-    (["--set", "sun.inclination=2"], "sun.inclination"),
-    (["--set", "surfaces.roof.lobe_width=0"], "surfaces.roof.lobe_width"),
-    (["--set", "noise.sigma=nan"], "noise.sigma"),
-    (["--set", "noise.sigma"], "dotted.key=value"),
-    (["--seed", "x"], "invalid int value"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--set", "sensr.inclination=1"], "sensr: unknown key"),
+        (["--set", "surfaces.roof.x=[25, -25]"], "surfaces.roof.x"),
+        (["--set", "sun.inclination=2"], "sun.inclination"),
+        (["--set", "surfaces.roof.lobe_width=0"], "surfaces.roof.lobe_width"),
+        (["--set", "noise.sigma=nan"], "noise.sigma"),
+        (["--set", "noise.sigma"], "dotted.key=value"),
+        (["--seed", "x"], "invalid int value"),
+    ],
+)
 def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, args, message):
     out = tmp_path / "out.csv"
     r = run("simulate", ROOF, *args, "-o", str(out))
@@ -86,18 +89,22 @@ def test_version_and_demo(tmp_path):
     for name in ("frame.csv", "frame.png", "result.nc", "result.json", "report.html"):
         assert (tmp_path / "demo" / name).exists(), name
     import json
+
     summary = json.loads((tmp_path / "demo" / "result.json").read_text())
     for name in ("tilt_frequency", "drive_frequency", "drive_amplitude"):
         p = summary["parameters"]["surfaces.roof.motion." + name]
         assert p["q05"] <= p["truth"] <= p["q95"], name
 
 
-@pytest.mark.parametrize("scene, override, message", [
-    ("roof_frame", "surfaces.roof.motion.k_lateral=-1", "k_lateral"),
-    ("roof_frame", "surfaces.roof.motion.mass=0", "mass"),
-    ("roof_frame", "surfaces.roof.motion.drive_frequency=[120]", "Nyquist"),
-    ("ground_rayleigh", "surfaces.ground.motion.radius=0", "radius"),
-])
+@pytest.mark.parametrize(
+    "scene, override, message",
+    [
+        ("roof_frame", "surfaces.roof.motion.k_lateral=-1", "k_lateral"),
+        ("roof_frame", "surfaces.roof.motion.mass=0", "mass"),
+        ("roof_frame", "surfaces.roof.motion.drive_frequency=[120]", "Nyquist"),
+        ("ground_rayleigh", "surfaces.ground.motion.radius=0", "radius"),
+    ],
+)
 def test_invalid_motion_parameters_exit_2(tmp_path, scene, override, message):
     r = run("simulate", str(SCENES / f"{scene}.toml"), "--set", override, "-o", str(tmp_path / "o.csv"))
     assert r.returncode == 2 and message in r.stderr
@@ -107,6 +114,7 @@ def test_invalid_motion_parameters_exit_2(tmp_path, scene, override, message):
 
 def test_study_fig4_writes_figure_curve_and_numbers(tmp_path):
     import json
+
     r = run("study", "fig4", "-o", str(tmp_path))
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith("fig4:")
@@ -137,6 +145,7 @@ def test_simulate_explain_dense_and_rtol(tmp_path):
 
 def test_forward_bench_rows_have_the_documented_fields():
     from vibinverse.bench.forward_bench import forward_rows, scaling_rows, speed_error_rows
+
     rows = forward_rows(SCENES, resolution=20, n_samples=400, log=lambda *a: None)
     assert [r["scene"] for r in rows] == ["roof_elastic", "glass_brewster", "roof_frame", "ground_rayleigh"]
     for r in rows:
@@ -147,8 +156,10 @@ def test_forward_bench_rows_have_the_documented_fields():
     se = speed_error_rows(SCENES, 24, n=200, coarse=(8,), log=lambda *a: None)
     assert {r["method"] for r in se} == {"fast", "dense"}
     from vibinverse.bench.likelihood_bench import likelihood_row
+
     lk = likelihood_row(SCENES / "roof_frame.toml", log=lambda *a: None)
     assert lk["samples"] == 4000 and lk["ours_us"] > 0 and lk["ratio"] > 0
     from vibinverse.bench.design_bench import design_row
+
     d = design_row(SCENES / "roof_elastic.toml", 4, workers=(1,), log=lambda *a: None)
     assert d["configurations"] == 16 and d["seconds"]["1"] > 0 and d["ms_per_configuration"]["1"] > 0

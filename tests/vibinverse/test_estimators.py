@@ -8,14 +8,15 @@ import pytest
 
 from forward.scene_file import apply_overrides, read_table, scene_from_table
 from forward.sensor import observe
-from vibinverse.builtin import builtin_scene
-from vibinverse.data import Series
 from vibinverse.estimators.sindy import SindyFailed, sindy_best
-from vibinverse.estimators.spectral import frame_guesses
-from vibinverse.fit import default_free, run_fit
-from vibinverse.frame_model import FrameLikelihood, modal_table
+from vibinverse.io.builtin import builtin_scene
+from vibinverse.io.series import Series
+from vibinverse.models import build_model
+from vibinverse.models.frame import FrameModel, modal_table
+from vibinverse.models.frame_spectral import frame_guesses
+from vibinverse.pipeline import run
+from vibinverse.posterior import Posterior
 from vibinverse.scene_keys import set_value
-from vibinverse.problem import Problem
 
 K = "surfaces.roof.motion."
 F_TILT = 2 * math.sqrt(3)  # Hz, the sec. 4.2 roof
@@ -39,7 +40,7 @@ def series(table: dict, seed: int, gaps: float = 0.0) -> Series:
 
 
 def sindy(table: dict, s: Series) -> dict:
-    like = FrameLikelihood(table, s)
+    like = FrameModel(table, s)
     return sindy_best(s, like, frame_guesses(s, like))
 
 
@@ -85,24 +86,30 @@ def test_sindy_and_casadi_with_damping_ratio_0_2():
         assert 0.1 < res["values"][K + "tilt_damping_ratio"] < 0.3
     except SindyFailed as exc:  # a broad resonance may be declined, but only with a reason
         assert "sindy:" in str(exc)
-    summary, _ = run_fit(Problem(table, s, default_free(K, table, s)), "casadi", progress=False)
+    summary = run(Posterior(build_model(table, s)), "casadi", progress=False).summary()
     p = summary["parameters"]
     assert abs(p[K + "tilt_damping_ratio"]["median"] - 0.2) < 4 * p[K + "tilt_damping_ratio"]["sd"]
     assert abs(p[K + "tilt_frequency"]["median"] - F_TILT) < 4 * p[K + "tilt_frequency"]["sd"]
 
 
 def test_two_drive_lines_0_3_hz_apart():
-    table = frame("noise.sigma=0.2", "surfaces.roof.motion.drive_frequency=[10.0, 10.3]",
-                  "surfaces.roof.motion.drive_amplitude=[1e-3, 1e-3]")
+    table = frame(
+        "noise.sigma=0.2",
+        "surfaces.roof.motion.drive_frequency=[10.0, 10.3]",
+        "surfaces.roof.motion.drive_amplitude=[1e-3, 1e-3]",
+    )
     s = series(table, 2)
     res = sindy(table, s)  # both lines are removed before the correlation function
     assert abs(res["values"][K + "tilt_frequency"] / F_TILT - 1) < 0.05
-    from vibinverse.params import Prior
+    from vibinverse.priors import Prior
 
-    free = {**default_free(K, table, s), K + "drive_frequency[1]": Prior("uniform", (10.15, 12.0)),
-            K + "drive_amplitude[1]": Prior("uniform", (0.0, 0.05))}
+    free = {
+        **build_model(table, s).default_priors(),
+        K + "drive_frequency[1]": Prior("uniform", (10.15, 12.0)),
+        K + "drive_amplitude[1]": Prior("uniform", (0.0, 0.05)),
+    }
     free[K + "drive_frequency"] = Prior("uniform", (8.0, 10.15))
-    summary, _ = run_fit(Problem(table, s, free), "casadi", progress=False)
+    summary = run(Posterior(build_model(table, s), free), "casadi", progress=False).summary()
     p = summary["parameters"]
     for name, truth in ((K + "drive_frequency", 10.0), (K + "drive_frequency[1]", 10.3)):
         assert abs(p[name]["median"] - truth) < 4 * p[name]["sd"] < 0.01
@@ -117,22 +124,32 @@ def test_sindy_with_ten_percent_gaps():
 def test_auto_chains_spectral_sindy_casadi_emcee_and_times_each(tmp_path):
     table = frame("noise.sigma=0.2")
     s = series(table, 4)
-    summary, _ = run_fit(Problem(table, s, default_free(K, table, s)), "auto", backend=tmp_path / "c.h5",
-                         progress=False, max_steps=300)
+    summary = run(
+        Posterior(build_model(table, s)), "auto", backend=tmp_path / "c.h5", progress=False, max_steps=300
+    ).summary()
     assert {"spectral_s", "sindy_s", "casadi_s", "mcmc_s"} <= set(summary["timing"])
     assert summary["diagnostics"]["sindy"]["status"] == "ok"
     # a declined SINDy does not stop the chain
     table = frame("noise.sigma=0.2", "sensor.inclination=pi/3")
     s = series(table, 4)
-    summary, _ = run_fit(Problem(table, s, default_free(K, table, s)), "sindy", progress=False)
+    summary = run(Posterior(build_model(table, s)), "sindy", progress=False).summary()
     assert summary["diagnostics"]["sindy"]["status"] == "declined" and summary["method"] == "spectral"
 
 
 def test_reduced_estimator_comparison_has_the_documented_rows():
     from vibinverse.bench.estimators_bench import run
 
-    res = run(builtin_scene(""), n_seeds=2, n_coverage=3, mcmc_seeds=1, mcmc_snrs=(30,), snrs=(30,),
-              workers=1, max_steps=400, log=lambda *a: None)
+    res = run(
+        builtin_scene(""),
+        n_seeds=2,
+        n_coverage=3,
+        mcmc_seeds=1,
+        mcmc_snrs=(30,),
+        snrs=(30,),
+        workers=1,
+        max_steps=400,
+        log=lambda *a: None,
+    )
     rows = [r for r in res["rows"] if r["scene"] == "frame"]
     assert {r["method"] for r in rows} == {"spectral", "sindy", "casadi", "mcmc"}
     keys = {"method", "param", "snr", "bias", "rmse", "crlb_sd", "coverage90", "time_s"}

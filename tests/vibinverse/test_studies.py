@@ -102,8 +102,10 @@ def test_fig15_optimum_follows_the_source_radius_not_the_wavelength():
     widths = np.linspace(2.0, 90.0, 45)
     best = []
     for f in (20.0, 80.0):
-        s = sweep("ground_rayleigh", [*one_cycle(f, 60), "footprint.resolution=40",
-                                      f"surfaces.ground.motion.frequency={f}"],
-                  [[f"footprint.x=[0, {w}]", f"footprint.y=[0, {w}]"] for w in widths])
+        s = sweep(
+            "ground_rayleigh",
+            [*one_cycle(f, 60), "footprint.resolution=40", f"surfaces.ground.motion.frequency={f}"],
+            [[f"footprint.x=[0, {w}]", f"footprint.y=[0, {w}]"] for w in widths],
+        )
         best.append(interior_peak(widths, s))
     assert best[0] / best[1] < 1.5  # a lambda/3 rule would give 4

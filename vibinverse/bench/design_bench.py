@@ -19,7 +19,12 @@ def design_row(scene_path: Path, n: int, workers: tuple[int, ...] = (1, 2), log=
     seconds = {}
     for w in workers:
         seconds[str(w)] = run_design(table, vary, None, workers=w)["seconds"]
-        log(f"  design {n}x{n} on {scene_path.stem}, {w} worker(s): {seconds[str(w)]:.1f} s "
-            f"({1e3 * seconds[str(w)] / n**2:.2f} ms per configuration)")
-    return {"configurations": n * n, "seconds": seconds,
-            "ms_per_configuration": {w: 1e3 * s / n**2 for w, s in seconds.items()}}
+        log(
+            f"  design {n}x{n} on {scene_path.stem}, {w} worker(s): {seconds[str(w)]:.1f} s "
+            f"({1e3 * seconds[str(w)] / n**2:.2f} ms per configuration)"
+        )
+    return {
+        "configurations": n * n,
+        "seconds": seconds,
+        "ms_per_configuration": {w: 1e3 * s / n**2 for w, s in seconds.items()},
+    }

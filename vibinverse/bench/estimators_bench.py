@@ -19,8 +19,8 @@ from __future__ import annotations
 import logging
 import tempfile
 import time
-from dataclasses import dataclass
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -51,12 +51,21 @@ class Scenario:
 
 SCENARIOS = {
     # sensor noise for drive-line SNR ~3, ~10, ~30 (`snr_actual` from design)
-    "frame": Scenario("frame", "roof_frame.toml", {3: 2.0, 10: 0.6, 30: 0.2},
-                      ("tilt_frequency", "tilt_damping_ratio", "drive_frequency", "drive_amplitude"),
-                      ("spectral", "sindy", "casadi")),
+    "frame": Scenario(
+        "frame",
+        "roof_frame.toml",
+        {3: 2.0, 10: 0.6, 30: 0.2},
+        ("tilt_frequency", "tilt_damping_ratio", "drive_frequency", "drive_amplitude"),
+        ("spectral", "sindy", "casadi"),
+    ),
     # the 40 Hz line of the quadrant roof (amplitude 0.59 over 500 samples): sigma = 0.59 / (SNR sqrt(2/500))
-    "plate": Scenario("plate", "roof_elastic.toml", {3: 3.1, 10: 0.93, 30: 0.31},
-                      ("frequency", "center_deflection", "phase"), ("spectral", "casadi", "map")),
+    "plate": Scenario(
+        "plate",
+        "roof_elastic.toml",
+        {3: 3.1, 10: 0.93, 30: 0.31},
+        ("frequency", "center_deflection", "phase"),
+        ("spectral", "casadi", "map"),
+    ),
 }
 SIGMAS = SCENARIOS["frame"].sigmas
 PARAMS = SCENARIOS["frame"].params
@@ -95,15 +104,22 @@ def _fit(job: tuple) -> dict[str, Any]:
     with threadpool_limits(1), tempfile.TemporaryDirectory() as tmp:
         prob = _problem(table, seed)
         t0 = time.perf_counter()
-        summary = run_pipeline(prob, method, seed=seed, backend=Path(tmp) / "chain.h5", progress=False,
-                               max_steps=max_steps).summary()
+        summary = run_pipeline(
+            prob, method, seed=seed, backend=Path(tmp) / "chain.h5", progress=False, max_steps=max_steps
+        ).summary()
         elapsed = time.perf_counter() - t0
     truth = prob.truth()
     failed = method == "sindy" and summary["method"] != "sindy"
     diag = summary["diagnostics"]
-    out = {"method": method, "seed": seed, "time_s": elapsed, "failed": failed, "converged": diag.get("converged"),
-           # the fit's own detection test (log-likelihood gain > threshold): an undetected line is reported as such
-           "detected": all(v for k, v in diag.items() if k.endswith("_detected"))}
+    out = {
+        "method": method,
+        "seed": seed,
+        "time_s": elapsed,
+        "failed": failed,
+        "converged": diag.get("converged"),
+        # the fit's own detection test (log-likelihood gain > threshold): an undetected line is reported as such
+        "detected": all(v for k, v in diag.items() if k.endswith("_detected")),
+    }
     for n, v in summary["parameters"].items():
         out[n] = {"est": v["median"], "q05": v["q05"], "q95": v["q95"], "truth": truth[n]}
     return out
@@ -117,9 +133,18 @@ def _quiet(fn, *args):
         return fn(*args)
 
 
-def run(scene_dir: Path, n_seeds: int = 20, n_coverage: int = 100, mcmc_seeds: int = 20,
-        mcmc_snrs: tuple[int, ...] = (10,), snrs: tuple[int, ...] = (3, 10, 30), workers: int = 2,
-        max_steps: int = 20000, scenarios: tuple[str, ...] = ("frame", "plate"), log=LOG) -> dict[str, Any]:
+def run(
+    scene_dir: Path,
+    n_seeds: int = 20,
+    n_coverage: int = 100,
+    mcmc_seeds: int = 20,
+    mcmc_snrs: tuple[int, ...] = (10,),
+    snrs: tuple[int, ...] = (3, 10, 30),
+    workers: int = 2,
+    max_steps: int = 20000,
+    scenarios: tuple[str, ...] = ("frame", "plate"),
+    log=LOG,
+) -> dict[str, Any]:
     """The comparison over `scenarios` (scene files from `scene_dir`); returns {"rows": [...],
     "settings": {...}, "seconds": total}. Rows carry their scenario's name in "scene"."""
     t_start = time.perf_counter()
@@ -142,13 +167,22 @@ def run(scene_dir: Path, n_seeds: int = 20, n_coverage: int = 100, mcmc_seeds: i
             if snr in mcmc_snrs and mcmc_seeds > 0:
                 fits["mcmc"] = _mcmc_fits(table, mcmc_seeds, workers, max_steps, log)
             for method, fl in fits.items():
-                rows += [{"scene": name, **r} for r in _rows(method, fl, snr, actual, bound, _motion_key(table),
-                                                             sc.params)]
-    return {"rows": rows, "seconds": time.perf_counter() - t_start,
-            "settings": {"scenes": {n: SCENARIOS[n].scene for n in scenarios},
-                         "sigmas": {n: {str(k): v for k, v in SCENARIOS[n].sigmas.items() if k in snrs} for n in scenarios},
-                         "n_seeds": n_seeds, "n_coverage_casadi": n_coverage, "mcmc_seeds": mcmc_seeds,
-                         "mcmc_snrs": list(mcmc_snrs), "workers": workers}}
+                rows += [
+                    {"scene": name, **r} for r in _rows(method, fl, snr, actual, bound, _motion_key(table), sc.params)
+                ]
+    return {
+        "rows": rows,
+        "seconds": time.perf_counter() - t_start,
+        "settings": {
+            "scenes": {n: SCENARIOS[n].scene for n in scenarios},
+            "sigmas": {n: {str(k): v for k, v in SCENARIOS[n].sigmas.items() if k in snrs} for n in scenarios},
+            "n_seeds": n_seeds,
+            "n_coverage_casadi": n_coverage,
+            "mcmc_seeds": mcmc_seeds,
+            "mcmc_snrs": list(mcmc_snrs),
+            "workers": workers,
+        },
+    }
 
 
 def _mcmc_fits(table: dict, n: int, workers: int, max_steps: int, log) -> list[dict]:
@@ -178,8 +212,15 @@ def _actual_snr(table: dict) -> float:
     return float(next(v for k, v in row.items() if k.startswith("snr ")))
 
 
-def _rows(method: str, fits: list[dict], snr: int, actual: float, bound: dict[str, float], key: str,
-          params: tuple[str, ...] = PARAMS) -> list[dict]:
+def _rows(
+    method: str,
+    fits: list[dict],
+    snr: int,
+    actual: float,
+    bound: dict[str, float],
+    key: str,
+    params: tuple[str, ...] = PARAMS,
+) -> list[dict]:
     out = []
     ok = [f for f in fits if not f["failed"] and f["detected"]]
     for p in params:
@@ -188,17 +229,29 @@ def _rows(method: str, fits: list[dict], snr: int, actual: float, bound: dict[st
         truth = np.array([f[name]["truth"] for f in ok]) if ok else np.array([])
         err = est - truth
         with_interval = [f for f in ok if f[name]["q05"] is not None]
-        cover = (float(np.mean([f[name]["q05"] <= f[name]["truth"] <= f[name]["q95"] for f in with_interval]))
-                 if with_interval else None)
-        out.append({"method": method, "param": name, "snr": snr, "snr_actual": actual,
-                    "bias": float(err.mean()) if err.size else None,
-                    "rmse": float(np.sqrt(np.mean(err**2))) if err.size else None,
-                    "crlb_sd": bound.get(name), "coverage90": cover,
-                    "time_s": float(np.mean([f["time_s"] for f in fits])),
-                    "n": len(fits), "n_failed": len(fits) - len(ok),
-                    "n_declined": sum(bool(f["failed"]) for f in fits),
-                    "n_undetected": sum(not f["failed"] and not f["detected"] for f in fits),
-                    "n_converged": sum(bool(f.get("converged")) for f in ok) if method == "mcmc" else None})
+        cover = (
+            float(np.mean([f[name]["q05"] <= f[name]["truth"] <= f[name]["q95"] for f in with_interval]))
+            if with_interval
+            else None
+        )
+        out.append(
+            {
+                "method": method,
+                "param": name,
+                "snr": snr,
+                "snr_actual": actual,
+                "bias": float(err.mean()) if err.size else None,
+                "rmse": float(np.sqrt(np.mean(err**2))) if err.size else None,
+                "crlb_sd": bound.get(name),
+                "coverage90": cover,
+                "time_s": float(np.mean([f["time_s"] for f in fits])),
+                "n": len(fits),
+                "n_failed": len(fits) - len(ok),
+                "n_declined": sum(bool(f["failed"]) for f in fits),
+                "n_undetected": sum(not f["failed"] and not f["detected"] for f in fits),
+                "n_converged": sum(bool(f.get("converged")) for f in ok) if method == "mcmc" else None,
+            }
+        )
     return out
 
 
@@ -217,10 +270,21 @@ def plot_speed_error(rows: list[dict], path: Path) -> None:
     colors = {"spectral": "C0", "sindy": "C1", "casadi": "C2", "mcmc": "C3", "map": "C4"}
     for ax, (scene, p) in zip(axes, panels):
         for r in rows:
-            if (r.get("scene", "frame") == scene and r["param"].rsplit(".", 1)[-1] == p and r["rmse"] is not None
-                    and r["crlb_sd"] and r["n"] - r["n_failed"] >= 10):
-                ax.loglog(r["time_s"], r["rmse"] / r["crlb_sd"], markers[r["snr"]], color=colors[r["method"]],
-                          ms=9, label=f"{r['method']} SNR {r['snr']}")
+            if (
+                r.get("scene", "frame") == scene
+                and r["param"].rsplit(".", 1)[-1] == p
+                and r["rmse"] is not None
+                and r["crlb_sd"]
+                and r["n"] - r["n_failed"] >= 10
+            ):
+                ax.loglog(
+                    r["time_s"],
+                    r["rmse"] / r["crlb_sd"],
+                    markers[r["snr"]],
+                    color=colors[r["method"]],
+                    ms=9,
+                    label=f"{r['method']} SNR {r['snr']}",
+                )
         ax.axhline(1.0, color="k", lw=0.8)
         ax.axhline(1.5, color="k", lw=0.8, ls="--")
         ax.set_xlabel("wall time per dataset (s)")

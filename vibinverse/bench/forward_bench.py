@@ -34,8 +34,9 @@ def _timed(fn) -> tuple[Any, float]:
     return out, time.perf_counter() - t0
 
 
-def forward_rows(scene_dir: Path, resolution: int, n_samples: int = N_SAMPLES, rtol: float = DEFAULT_RTOL,
-                 log=LOG) -> list[dict]:
+def forward_rows(
+    scene_dir: Path, resolution: int, n_samples: int = N_SAMPLES, rtol: float = DEFAULT_RTOL, log=LOG
+) -> list[dict]:
     """One row per example scene: dense reference vs fast path at the same resolution."""
     rows = []
     for name in SCENES:
@@ -44,11 +45,20 @@ def forward_rows(scene_dir: Path, resolution: int, n_samples: int = N_SAMPLES, r
         compiled, t_fast = _timed(lambda: compile_scene(scene, rtol=rtol, seed=0))
         fast, t_eval = _timed(compiled.signal)
         err = float(np.abs(fast - ref).max() / np.ptp(ref))
-        row = {"scene": name, "subpixels": resolution**2, "samples": n_samples, "reference_s": t_ref,
-               "fast_s": t_fast + t_eval, "speedup": t_ref / (t_fast + t_eval), "rel_error": err,
-               "paths": {s.name: s.kind for s in compiled.surfaces}}
-        log(f"  {name:<16} reference {t_ref:7.2f} s   fast {row['fast_s']:7.3f} s   speedup {row['speedup']:7.0f}x"
-            f"   rel_error {err:.1e}   ({', '.join(f'{k}: {v}' for k, v in row['paths'].items())})")
+        row = {
+            "scene": name,
+            "subpixels": resolution**2,
+            "samples": n_samples,
+            "reference_s": t_ref,
+            "fast_s": t_fast + t_eval,
+            "speedup": t_ref / (t_fast + t_eval),
+            "rel_error": err,
+            "paths": {s.name: s.kind for s in compiled.surfaces},
+        }
+        log(
+            f"  {name:<16} reference {t_ref:7.2f} s   fast {row['fast_s']:7.3f} s   speedup {row['speedup']:7.0f}x"
+            f"   rel_error {err:.1e}   ({', '.join(f'{k}: {v}' for k, v in row['paths'].items())})"
+        )
         rows.append(row)
     return rows
 
@@ -75,11 +85,25 @@ def speed_error_rows(scene_dir: Path, ref_res: int, n: int = 1000, coarse=(16, 3
     rows = []
     for rtol in (1e-2, 1e-4, 1e-6, 1e-9):
         out, t = _timed(lambda: compile_scene(scene, rtol=rtol, seed=0).signal())
-        rows.append({"method": "fast", "setting": f"rtol={rtol:g}", "time_s": t, "rel_error": float(np.abs(out - ref).max() / ptp)})
+        rows.append(
+            {
+                "method": "fast",
+                "setting": f"rtol={rtol:g}",
+                "time_s": t,
+                "rel_error": float(np.abs(out - ref).max() / ptp),
+            }
+        )
     for res in coarse:
         coarse = _scene(path, res, n)
         out, t = _timed(lambda: pixel_signal(coarse, seed=0))
-        rows.append({"method": "dense", "setting": f"{res}x{res}", "time_s": t, "rel_error": float(np.abs(out - ref).max() / ptp)})
+        rows.append(
+            {
+                "method": "dense",
+                "setting": f"{res}x{res}",
+                "time_s": t,
+                "rel_error": float(np.abs(out - ref).max() / ptp),
+            }
+        )
     for r in rows:
         log(f"  {r['method']:<5} {r['setting']:<11} {r['time_s']:8.3f} s   rel_error {r['rel_error']:.1e}")
     return rows
@@ -96,8 +120,13 @@ def plot_speed_error(rows: list[dict], path: Path) -> None:
         sel = [r for r in rows if r["method"] == method]
         ax.loglog([r["time_s"] for r in sel], [max(r["rel_error"], 1e-17) for r in sel], marker=marker, label=method)
         for r in sel:
-            ax.annotate(r["setting"], (r["time_s"], max(r["rel_error"], 1e-17)), fontsize=7, xytext=(4, 2),
-                        textcoords="offset points")
+            ax.annotate(
+                r["setting"],
+                (r["time_s"], max(r["rel_error"], 1e-17)),
+                fontsize=7,
+                xytext=(4, 2),
+                textcoords="offset points",
+            )
     ax.set(xlabel="wall time (s)", ylabel="max |error| / peak-to-peak", title="elastic roof: speed against error")
     ax.legend()
     fig.savefig(path, dpi=110, format="png")

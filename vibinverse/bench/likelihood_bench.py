@@ -4,8 +4,8 @@ rendering; and the demo's MCMC wall time to convergence."""
 
 from __future__ import annotations
 
-import logging
 import json
+import logging
 import tempfile
 import time
 import timeit
@@ -64,8 +64,11 @@ def likelihood_row(scene_path: Path, log=LOG) -> dict:
 
     theirs = _best(cel)
     row.update({"celerite2_us": theirs, "ratio": ours / theirs, "filter_ratio": filt / theirs})
-    log(f"  T = {t.size}: ours {ours:.0f} us (mean + Kalman; filter alone {filt:.0f} us), celerite2 SHO {theirs:.0f} us;"
-        f" ratio {ours / theirs:.2f} (filter alone {filt / theirs:.2f})")
+    log(
+        f"  T = {t.size}: ours {ours:.0f} us (mean + Kalman; filter alone {filt:.0f} us), "
+        f"celerite2 SHO {theirs:.0f} us;"
+        f" ratio {ours / theirs:.2f} (filter alone {filt / theirs:.2f})"
+    )
     return row
 
 
@@ -76,10 +79,18 @@ def demo_mcmc_row(scene_path: Path, log=LOG) -> dict:
         summary = run_pipeline(prob, "auto", backend=Path(d) / "c.h5", max_steps=7000, progress=False).summary()
         wall = time.perf_counter() - t0
     diag = summary["diagnostics"]
-    log(f"  demo fit: {wall:.1f} s ({summary['timing']['mcmc_s']:.1f} s MCMC), {diag['n_steps']} steps, "
-        f"converged {diag['converged']}, R-hat {diag['rhat_max']:.3f}")
-    return {"wall_s": wall, "mcmc_s": summary["timing"]["mcmc_s"], "n_steps": diag["n_steps"],
-            "converged": diag["converged"], "rhat_max": diag["rhat_max"], "ess_min": diag["ess_min"]}
+    log(
+        f"  demo fit: {wall:.1f} s ({summary['timing']['mcmc_s']:.1f} s MCMC), {diag['n_steps']} steps, "
+        f"converged {diag['converged']}, R-hat {diag['rhat_max']:.3f}"
+    )
+    return {
+        "wall_s": wall,
+        "mcmc_s": summary["timing"]["mcmc_s"],
+        "n_steps": diag["n_steps"],
+        "converged": diag["converged"],
+        "rhat_max": diag["rhat_max"],
+        "ess_min": diag["ess_min"],
+    }
 
 
 def response_fit_row(scene_path: Path, log=LOG) -> dict:
@@ -108,8 +119,17 @@ def response_fit_row(scene_path: Path, log=LOG) -> dict:
     summary = run_pipeline(prob, "map", progress=False).summary()
     map_s = time.perf_counter() - t0
     z = {n: (p["median"] - p["truth"]) / p["sd"] for n, p in summary["parameters"].items() if p["sd"]}
-    log(f"  elastic roof, {series.time.size} samples: ours {ours:.0f} us per log-likelihood, dense rendering "
+    log(
+        f"  elastic roof, {series.time.size} samples: ours {ours:.0f} us per log-likelihood, dense rendering "
         f"{dense_us / 1e3:.0f} ms ({dense_us / ours:.0f}x); max error {error:.1e} x sigma; MAP {map_s:.1f} s, "
-        f"errors {min(z.values()):+.1f} .. {max(z.values()):+.1f} sd")
-    return {"samples": int(series.time.size), "ours_us": ours, "dense_us": dense_us, "speedup": dense_us / ours,
-            "max_error_over_sigma": error, "map_s": map_s, "map_error_sd": z}
+        f"errors {min(z.values()):+.1f} .. {max(z.values()):+.1f} sd"
+    )
+    return {
+        "samples": int(series.time.size),
+        "ours_us": ours,
+        "dense_us": dense_us,
+        "speedup": dense_us / ours,
+        "max_error_over_sigma": error,
+        "map_s": map_s,
+        "map_error_sd": z,
+    }

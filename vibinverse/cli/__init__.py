@@ -60,8 +60,9 @@ def main(argv: list[str] | None = None) -> int:
         configure_logging(getattr(args, "quiet", False), getattr(args, "verbose", False))
         args.func(args)
     except (VibinverseError, ForwardSceneError) as exc:
-        print(f"vibinverse: error: {exc}" if not isinstance(exc, Interrupted) else f"vibinverse: {exc}",
-              file=sys.stderr)
+        print(
+            f"vibinverse: error: {exc}" if not isinstance(exc, Interrupted) else f"vibinverse: {exc}", file=sys.stderr
+        )
         return exit_code(exc)
     except KeyboardInterrupt:
         print("vibinverse: interrupted", file=sys.stderr)

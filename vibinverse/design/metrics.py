@@ -16,12 +16,11 @@ white noise).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
-from collections.abc import Callable
 
 from forward.errors import SceneError as ForwardSceneError
 from forward.motion import MOTION_KINDS
@@ -73,8 +72,9 @@ def _frame_targets(table: dict, targets: list[str]) -> None:
     names = FrameModel(table, Series(t, np.zeros(t.size), "design")).fittable()
     for target in targets:
         if target not in names:
-            raise SceneError(f"--target {target}: not a parameter of this frame scene; choose from "
-                             f"{', '.join(sorted(names))}")
+            raise SceneError(
+                f"--target {target}: not a parameter of this frame scene; choose from {', '.join(sorted(names))}"
+            )
 
 
 def _sensitivity(dc: float, ac: np.ndarray) -> float:
@@ -124,8 +124,10 @@ def _deterministic_metrics(table: dict, scene: Scene, targets: list[str], cache:
     var = noise_variance(scene.noise, dc + float(ac.mean()), dc + float(ac.max()))
     if not var > 0:
         raise SceneError("noise.sigma: design needs sensor noise (sigma > 0, photons or an ADC) to bound parameters")
-    row: dict[str, Any] = {"sensitivity": _sensitivity(dc, ac),
-                           "model_error": compiled.error_bound() / max(float(np.ptp(ac)), 1e-300)}
+    row: dict[str, Any] = {
+        "sensitivity": _sensitivity(dc, ac),
+        "model_error": compiled.error_bound() / max(float(np.ptp(ac)), 1e-300),
+    }
     fs, n = scene.sampling.fs, t.size
     for f in _line_frequencies(scene):
         for h, label in ((1, ""), (2, " (2f)")):
@@ -149,7 +151,12 @@ def _mean_derivative(table: dict, scene: Scene, name: str, moving: list, cache: 
         out = np.zeros(t.size)
         for k, x, y, weight, d in moving:
             m = scene.surfaces[k].motion
-            out += irr * weight * (taylor_surface_ac(m, x, y, d, t + h, cache) - taylor_surface_ac(m, x, y, d, t - h, cache)) / (2 * h)
+            out += (
+                irr
+                * weight
+                * (taylor_surface_ac(m, x, y, d, t + h, cache) - taylor_surface_ac(m, x, y, d, t - h, cache))
+                / (2 * h)
+            )
         return out
     parts = name.split(".")
     if len(parts) >= 4 and parts[0] == "surfaces" and parts[2] == "motion":
@@ -159,13 +166,21 @@ def _mean_derivative(table: dict, scene: Scene, name: str, moving: list, cache: 
         for kk, x, y, weight, d in moving:
             if kk == k:
                 up, dn = (_motion_with(table, scene.surfaces[k], name, v + s * h) for s in (1, -1))
-                return irr * weight * (taylor_surface_ac(up, x, y, d, t, cache) - taylor_surface_ac(dn, x, y, d, t, cache)) / (2 * h)
+                return (
+                    irr
+                    * weight
+                    * (taylor_surface_ac(up, x, y, d, t, cache) - taylor_surface_ac(dn, x, y, d, t, cache))
+                    / (2 * h)
+                )
         return np.zeros(t.size)  # the surface is outside the footprint
     v = get_value(table, name)  # any other scene value: re-compile the scene at name +- h
     h = _step(name, v, scene.sampling.fs)
     (dc_up, ac_up), (dc_dn, ac_dn) = (
-        compile_scene(scene_from_table(_with(table, name, v + s * h)), seed=0, force=DESIGN_MODEL,
-                      shape_cache=cache).parts() for s in (1, -1))
+        compile_scene(
+            scene_from_table(_with(table, name, v + s * h)), seed=0, force=DESIGN_MODEL, shape_cache=cache
+        ).parts()
+        for s in (1, -1)
+    )
     return ((ac_up - ac_dn) + (dc_up - dc_dn)) / (2 * h)
 
 
@@ -207,11 +222,15 @@ def _frame_metrics(table: dict, scene: Scene, targets: list[str], cache: dict) -
     values = {n: _value(base, n) for n in names}
     comps = like.components(values)
     if comps.r <= 0 and not comps.q.any():
-        raise SceneError("noise.sigma: design needs noise (sensor sigma > 0 or frame noise_rms > 0) to bound parameters")
+        raise SceneError(
+            "noise.sigma: design needs noise (sensor sigma > 0 or frame noise_rms > 0) to bound parameters"
+        )
     compiled = compile_scene(scene, seed=0, force=DESIGN_MODEL, shape_cache=cache)
     dc, ac = compiled.parts()
-    row: dict[str, Any] = {"sensitivity": _sensitivity(dc, ac),
-                           "model_error": compiled.error_bound() / max(float(np.ptp(ac)), 1e-300)}
+    row: dict[str, Any] = {
+        "sensitivity": _sensitivity(dc, ac),
+        "model_error": compiled.error_bound() / max(float(np.ptp(ac)), 1e-300),
+    }
     dt = like.dt
     motion = next(s.motion for s in scene.surfaces if isinstance(s.motion, FrameMotion))
     for f in np.atleast_1d(motion.drive.frequencies if motion.drive is not None else []):
@@ -253,4 +272,3 @@ DESIGNS: dict[str, Design] = {
     FrameModel.name: Design(_frame_targets, _frame_metrics),
     DeterministicModel.name: Design(_deterministic_targets, _deterministic_metrics),
 }
-

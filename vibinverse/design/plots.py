@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import itertools
 import math
-from pathlib import Path
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -19,8 +19,10 @@ def plot_design(result: dict[str, Any]) -> dict[str, Callable[[Path], None]]:
     targets = result["targets"]
     sens = lambda r: r["sensitivity"] if r.get("status") == "ok" else math.nan
     worst = lambda r: score(r, targets) if r.get("status") == "ok" else math.nan
-    return {"design_sensitivity.png": _writer(result, sens, "sensitivity S (21)", result["threshold"], best=max),
-            "design_crlb.png": _writer(result, worst, "worst relative Cramer-Rao sd of the targets", None, best=min)}
+    return {
+        "design_sensitivity.png": _writer(result, sens, "sensitivity S (21)", result["threshold"], best=max),
+        "design_crlb.png": _writer(result, worst, "worst relative Cramer-Rao sd of the targets", None, best=min),
+    }
 
 
 def _writer(result, metric, label, threshold, best):
@@ -34,6 +36,7 @@ def _writer(result, metric, label, threshold, best):
         _draw(ax, fig, result, metric, label, threshold, best)
         fig.savefig(path, dpi=100, format="png")
         plt.close(fig)
+
     return write
 
 

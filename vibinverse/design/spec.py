@@ -19,8 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from forward.errors import SceneError
+from forward.errors import SceneError as ForwardSceneError
 from forward.validation import expression
+from vibinverse.errors import SceneError
 from vibinverse.scene_keys import set_value
 
 DESIGN_KEYS = ("sensor.offset", "footprint.center", "footprint.center_x", "footprint.center_y", "footprint.width")
@@ -71,14 +72,14 @@ def _is_number(text: str) -> bool:
     try:
         expression(text, "")
         return True
-    except SceneError:
+    except ForwardSceneError:
         return False
 
 
 def _number(text: str, key: str) -> float:
     try:
         value = expression(text.strip(), key)
-    except SceneError:
+    except ForwardSceneError:
         raise SceneError(f"--vary {key}: {text.strip()!r} is not a number") from None
     if not math.isfinite(value):
         raise SceneError(f"--vary {key}: {text.strip()!r} is not a finite number")
@@ -104,8 +105,10 @@ def _apply_design_key(table: dict, key: str, value: float) -> None:
 
         sun = scene_from_table(table).sun  # the sun as the rest of the configuration places it
         if not 0.0 < sun.inclination + value < math.pi / 2:
-            raise SceneError(f"sensor.offset: {value:g} rad puts the view at elevation "
-                             f"{sun.inclination + value:g} rad; allowed: inside (0, pi/2)")
+            raise SceneError(
+                f"sensor.offset: {value:g} rad puts the view at elevation "
+                f"{sun.inclination + value:g} rad; allowed: inside (0, pi/2)"
+            )
         table.setdefault("sensor", {})
         table["sensor"]["inclination"] = sun.inclination + value
         table["sensor"]["azimuth"] = sun.azimuth + math.pi

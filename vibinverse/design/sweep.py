@@ -11,13 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from vibinverse.errors import SceneError
+from forward.errors import SceneError as ForwardSceneError
 from forward.materials import Fresnel
 from forward.scene_file import scene_from_table
 from vibinverse.design import metrics
 from vibinverse.design.plots import plot_design
 from vibinverse.design.ranking import rank
 from vibinverse.design.spec import Axis, configure, grid, parse_vary
+from vibinverse.errors import SceneError
 from vibinverse.io.atomic import write_all
 
 PAPER_THRESHOLD = 1e-4  # the paper's detectability threshold on the sensitivity (21)
@@ -33,15 +34,25 @@ def default_axes(table: dict) -> list[Axis]:
         s = specular[0]
         half = max(s.x[1] - s.x[0], s.y[1] - s.y[0]) / 2
         centre = (s.x[0] + s.x[1]) / 2
-        return [Axis("sensor.offset", tuple(np.linspace(-0.04, 0.04, 33).tolist())),
-                Axis("footprint.center", tuple(np.linspace(centre, centre + half, 5).tolist()))]
+        return [
+            Axis("sensor.offset", tuple(np.linspace(-0.04, 0.04, 33).tolist())),
+            Axis("footprint.center", tuple(np.linspace(centre, centre + half, 5).tolist())),
+        ]
     width = max(scene.footprint.x[1] - scene.footprint.x[0], scene.footprint.y[1] - scene.footprint.y[0])
-    return [Axis("sun.inclination", tuple(np.geomspace(0.01, 0.6, 16).tolist())),
-            Axis("footprint.width", tuple(np.linspace(width / 10, 2 * width, 12).tolist()))]
+    return [
+        Axis("sun.inclination", tuple(np.geomspace(0.01, 0.6, 16).tolist())),
+        Axis("footprint.width", tuple(np.linspace(width / 10, 2 * width, 12).tolist())),
+    ]
 
 
-def run_design(table: dict, vary: list[str], targets: list[str] | None, threshold: float = PAPER_THRESHOLD,
-               workers: int = 1, progress: bool = False) -> dict[str, Any]:
+def run_design(
+    table: dict,
+    vary: list[str],
+    targets: list[str] | None,
+    threshold: float = PAPER_THRESHOLD,
+    workers: int = 1,
+    progress: bool = False,
+) -> dict[str, Any]:
     """Evaluate the sweep; returns {"axes", "targets", "rows", "best", "threshold", "seconds"}.
 
     Specification errors (unknown key, empty range, non-numeric value, unknown target) raise
@@ -62,14 +73,20 @@ def run_design(table: dict, vary: list[str], targets: list[str] | None, threshol
     t0 = time.perf_counter()
     rows = _evaluate_all(table, configs, targets, workers, progress)
     seconds = time.perf_counter() - t0
-    return {"axes": axes, "targets": targets, "rows": rows, "threshold": threshold, "seconds": seconds,
-            "best": rank(rows, targets, threshold)[:N_BEST]}
+    return {
+        "axes": axes,
+        "targets": targets,
+        "rows": rows,
+        "threshold": threshold,
+        "seconds": seconds,
+        "best": rank(rows, targets, threshold)[:N_BEST],
+    }
 
 
 def _validate(table: dict, key: str, value: Any) -> None:
     try:
         scene_from_table(configure(table, {key: value}))
-    except SceneError as exc:
+    except ForwardSceneError as exc:
         text = str(exc)
         if "unknown key" in text or "no such" in text or "not a table" in text or "is a value" in text:
             raise SceneError(f"--vary {key}: {text}") from None
@@ -86,7 +103,9 @@ def _evaluate_all(table, configs, targets, workers, progress) -> list[dict[str, 
     rest = configs[1:]
     chunks = [rest[i::workers] for i in range(workers)]
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as pool:
-        parts = list(pool.map(_evaluate_chunk, [(table, c, targets, progress and i == 0) for i, c in enumerate(chunks)]))
+        parts = list(
+            pool.map(_evaluate_chunk, [(table, c, targets, progress and i == 0) for i, c in enumerate(chunks)])
+        )
     rows = [None] * len(rest)
     for w, part in enumerate(parts):
         rows[w::workers] = part
@@ -113,7 +132,7 @@ def _evaluate_configs(table, configs, targets, progress) -> list[dict[str, Any]]
         try:
             row.update(metrics.evaluate(configure(table, config), targets, cache))
             row["status"] = "ok"
-        except SceneError as exc:
+        except ForwardSceneError as exc:
             row["status"] = str(exc)
         out.append(row)
     return out
@@ -133,11 +152,16 @@ def write_design(result: dict[str, Any], outdir: Path) -> list[Path]:
             out.writerows([[_cell(r.get(c, "")) for c in columns] for r in rows])
 
     def js(path: Path) -> None:
-        doc = {"best": [_jsonable(r) for r in result["best"]], "n_configurations": len(rows),
-               "n_ok": sum(r.get("status") == "ok" for r in rows),
-               "n_detectable": sum(r.get("status") == "ok" and r["sensitivity"] >= result["threshold"] for r in rows),
-               "threshold": result["threshold"], "targets": result["targets"],
-               "axes": {a.key: list(a.values) for a in axes}, "seconds": result["seconds"]}
+        doc = {
+            "best": [_jsonable(r) for r in result["best"]],
+            "n_configurations": len(rows),
+            "n_ok": sum(r.get("status") == "ok" for r in rows),
+            "n_detectable": sum(r.get("status") == "ok" and r["sensitivity"] >= result["threshold"] for r in rows),
+            "threshold": result["threshold"],
+            "targets": result["targets"],
+            "axes": {a.key: list(a.values) for a in axes},
+            "seconds": result["seconds"],
+        }
         path.write_text(json.dumps(doc, indent=2))
 
     writers = {outdir / "design.csv": csv, outdir / "design.json": js}

@@ -8,5 +8,13 @@ from vibinverse.estimators.scipy_map import ScipyMap
 from vibinverse.estimators.sindy import SindyEstimator
 from vibinverse.estimators.spectral import SpectralEstimator
 
-__all__ = ["ESTIMATORS", "CasadiMap", "Emcee", "Estimator", "ScipyMap", "SindyEstimator", "SpectralEstimator",
-           "register_estimator"]
+__all__ = [
+    "ESTIMATORS",
+    "CasadiMap",
+    "Emcee",
+    "Estimator",
+    "ScipyMap",
+    "SindyEstimator",
+    "SpectralEstimator",
+    "register_estimator",
+]

@@ -47,16 +47,26 @@ def register_estimator(cls: type[Estimator]) -> type[Estimator]:
 
 def base_result(posterior: Posterior, method: str, point: dict[str, float], **fields: Any) -> FitResult:
     """A FitResult of `posterior`'s parameters."""
-    return FitResult(method=method, names=list(posterior.space.names), priors=list(posterior.space.priors),
-                     point=dict(point), series=posterior.series, **fields)
+    return FitResult(
+        method=method,
+        names=list(posterior.space.names),
+        priors=list(posterior.space.priors),
+        point=dict(point),
+        series=posterior.series,
+        **fields,
+    )
 
 
 def complete(result: FitResult, posterior: Posterior) -> FitResult:
     """Add what every result carries: the truth, the data's description, the detection test of
     every line at the point estimate, and the predictive band."""
     series = posterior.series
-    data = {"source": series.source, "description": series.describe(), "n_gaps": series.n_gaps,
-            "n_samples": int(series.time.size)}
+    data = {
+        "source": series.source,
+        "description": series.describe(),
+        "n_gaps": series.n_gaps,
+        "n_samples": int(series.time.size),
+    }
     described = posterior.model.describe()
     if described is not None:
         data["model"] = dict(described)

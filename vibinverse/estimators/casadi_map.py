@@ -24,19 +24,34 @@ def _compiled(problem: Posterior):
     """(objective, IPOPT solver, exact Hessian function) for this problem's scene, priors and
     sampling; built once and reused for every series of the same design (a bench, a study)."""
     like = problem.model
-    key = (like.name, json.dumps(like.base, sort_keys=True, default=str), tuple(problem.space.names),
-           tuple(str(p) for p in problem.space.priors), hash(like.series.time.tobytes()),
-           json.dumps(like.describe(), sort_keys=True))
+    key = (
+        like.name,
+        json.dumps(like.base, sort_keys=True, default=str),
+        tuple(problem.space.names),
+        tuple(str(p) for p in problem.space.priors),
+        hash(like.series.time.tobytes()),
+        json.dumps(like.describe(), sort_keys=True),
+    )
     if key not in _CACHE:
         obj = like.casadi_objective(problem)  # Unsupported when the free values leave its form
         z = ca.MX.sym("z", len(problem.space))
         p = ca.MX.sym("p", 2 * like.series.time.size)
-        f = obj.function(z, p[:like.series.time.size], p[like.series.time.size:])
-        solver = ca.nlpsol("map", "ipopt", {"x": z, "p": p, "f": f},
-                           {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "expand": True,
-                            "show_eval_warnings": False,  # IPOPT rejects inf trial points itself
-                            "ipopt.hessian_approximation": "exact",  # converges in ~10 iterations; L-BFGS took 300
-                            "ipopt.tol": 1e-8, "ipopt.max_iter": 300})
+        f = obj.function(z, p[: like.series.time.size], p[like.series.time.size :])
+        solver = ca.nlpsol(
+            "map",
+            "ipopt",
+            {"x": z, "p": p, "f": f},
+            {
+                "ipopt.print_level": 0,
+                "print_time": False,
+                "ipopt.sb": "yes",
+                "expand": True,
+                "show_eval_warnings": False,  # IPOPT rejects inf trial points itself
+                "ipopt.hessian_approximation": "exact",  # converges in ~10 iterations; L-BFGS took 300
+                "ipopt.tol": 1e-8,
+                "ipopt.max_iter": 300,
+            },
+        )
         hess = ca.Function("H", [z, p], [ca.hessian(f, z)[0]])
         if len(_CACHE) >= 4:
             _CACHE.pop(next(iter(_CACHE)))
@@ -75,8 +90,13 @@ def casadi_map(problem: Posterior, starts: list[dict[str, float]]) -> dict:
     cov = np.linalg.inv(0.5 * (h + h.T))
     jac = np.array([np.exp(p.log_jacobian(float(v))) for p, v in zip(problem.space.priors, zs)])
     sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * jac
-    return {"z": zs, "values": problem.values(zs), "cov_z": cov, "sd": dict(zip(problem.space.names, sd)),
-            "log_post": -f}
+    return {
+        "z": zs,
+        "values": problem.values(zs),
+        "cov_z": cov,
+        "sd": dict(zip(problem.space.names, sd)),
+        "log_post": -f,
+    }
 
 
 @register_estimator

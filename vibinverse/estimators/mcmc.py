@@ -50,9 +50,19 @@ def _stop_on_signals():
             signal.signal(s, h)
 
 
-def run(problem: Posterior, z_map: np.ndarray, cov_z: np.ndarray, backend_path: Path, *, resume: bool = False,
-        nwalkers: int | None = None, max_steps: int = 20000, workers: int = 1, seed: int = 0,
-        progress: bool = True) -> dict:
+def run(
+    problem: Posterior,
+    z_map: np.ndarray,
+    cov_z: np.ndarray,
+    backend_path: Path,
+    *,
+    resume: bool = False,
+    nwalkers: int | None = None,
+    max_steps: int = 20000,
+    workers: int = 1,
+    seed: int = 0,
+    progress: bool = True,
+) -> dict:
     """Sample until converged or `max_steps`; returns chain, log_prob, tau and the stopping facts."""
     ndim = z_map.size
     nwalkers = nwalkers or max(2 * ndim + 2, 16)
@@ -71,8 +81,9 @@ def run(problem: Posterior, z_map: np.ndarray, cov_z: np.ndarray, backend_path: 
     pool = get_context("fork").Pool(workers) if workers > 1 else None
     converged, tau = False, np.full(ndim, np.inf)
     try:
-        sampler = emcee.EnsembleSampler(nwalkers, ndim, _worker_log_prob if pool else problem, pool=pool,
-                                        backend=backend, moves=moves())
+        sampler = emcee.EnsembleSampler(
+            nwalkers, ndim, _worker_log_prob if pool else problem, pool=pool, backend=backend, moves=moves()
+        )
         with _stop_on_signals() as flag:
             converged, tau = _converged(backend)
             remaining = max_steps - backend.iteration
@@ -89,9 +100,15 @@ def run(problem: Posterior, z_map: np.ndarray, cov_z: np.ndarray, backend_path: 
             pool.close()
             pool.join()
     chain = backend.get_chain()
-    return {"chain": chain, "log_prob": backend.get_log_prob(), "tau": tau, "converged": converged,
-            "n_steps": backend.iteration, "nwalkers": nwalkers,
-            "acceptance": float(np.mean(backend.accepted / max(backend.iteration, 1)))}
+    return {
+        "chain": chain,
+        "log_prob": backend.get_log_prob(),
+        "tau": tau,
+        "converged": converged,
+        "n_steps": backend.iteration,
+        "nwalkers": nwalkers,
+        "acceptance": float(np.mean(backend.accepted / max(backend.iteration, 1))),
+    }
 
 
 def moves() -> list:
@@ -136,9 +153,15 @@ def sampler_diagnostics(values: np.ndarray, res: dict) -> dict:
         ds = az.convert_to_dataset({f"p{j}": values[..., j] for j in range(values.shape[-1])})
         rhat = float(np.nanmax([az.rhat(ds)[v].item() for v in ds.data_vars]))
         ess = float(np.nanmin([az.ess(ds)[v].item() for v in ds.data_vars]))
-    return {"rhat_max": rhat, "ess_min": ess, "tau_max": float(np.nanmax(res["tau"])), "n_steps": int(res["n_steps"]),
-            "nwalkers": int(res["nwalkers"]), "acceptance": res["acceptance"],
-            "converged": bool(res["converged"] and rhat < 1.05)}
+    return {
+        "rhat_max": rhat,
+        "ess_min": ess,
+        "tau_max": float(np.nanmax(res["tau"])),
+        "n_steps": int(res["n_steps"]),
+        "nwalkers": int(res["nwalkers"]),
+        "acceptance": res["acceptance"],
+        "converged": bool(res["converged"] and rhat < 1.05),
+    }
 
 
 @register_estimator
@@ -148,20 +171,48 @@ class Emcee(Estimator):
 
     name = "mcmc"
 
-    def estimate(self, posterior: Posterior, start: FitResult | None, *, backend: Path | None = None,
-                 resume: bool = False, workers: int = 1, seed: int = 0, max_steps: int = 20000,
-                 progress: bool = True, **options: Any) -> FitResult:
+    def estimate(
+        self,
+        posterior: Posterior,
+        start: FitResult | None,
+        *,
+        backend: Path | None = None,
+        resume: bool = False,
+        workers: int = 1,
+        seed: int = 0,
+        max_steps: int = 20000,
+        progress: bool = True,
+        **options: Any,
+    ) -> FitResult:
         if start is None or start.z is None or start.cov_z is None:
             raise InputError("mcmc: needs a MAP start (a result with z and cov_z); run a MAP estimator first")
         backend = Path(backend or "vibinverse-chain.h5")
         logger.info("sampling with emcee (checkpoint %s) ...", backend)
-        res = run(posterior, start.z, start.cov_z, backend, resume=resume, workers=workers, seed=seed,
-                  max_steps=max_steps, progress=progress)
+        res = run(
+            posterior,
+            start.z,
+            start.cov_z,
+            backend,
+            resume=resume,
+            workers=workers,
+            seed=seed,
+            max_steps=max_steps,
+            progress=progress,
+        )
         chain = res["chain"]
         tau = res["tau"]
         burn = int(min(chain.shape[0] // 2, 3 * np.nanmax(tau) if np.all(np.isfinite(tau)) else chain.shape[0] // 2))
         kept = chain[burn:]
         values = np.array([[list(posterior.values(z).values()) for z in walker] for walker in kept.transpose(1, 0, 2)])
         diagnostics = {**sampler_diagnostics(values, res), "multimodal": multimodal(values, posterior.space.names)}
-        return base_result(posterior, self.name, start.point, chains=values, log_prob=res["log_prob"][burn:].T,
-                           z=start.z, cov_z=start.cov_z, log_post=start.log_post, diagnostics=diagnostics)
+        return base_result(
+            posterior,
+            self.name,
+            start.point,
+            chains=values,
+            log_prob=res["log_prob"][burn:].T,
+            z=start.z,
+            cov_z=start.cov_z,
+            log_post=start.log_post,
+            diagnostics=diagnostics,
+        )

@@ -27,7 +27,9 @@ def hessian(f, z: np.ndarray, steps: np.ndarray) -> np.ndarray:
         for j in range(i):
             ej = np.zeros(n)
             ej[j] = steps[j]
-            h[i, j] = h[j, i] = (f(z + ei + ej) - f(z + ei - ej) - f(z - ei + ej) + f(z - ei - ej)) / (4 * steps[i] * steps[j])
+            h[i, j] = h[j, i] = (f(z + ei + ej) - f(z + ei - ej) - f(z - ei + ej) + f(z - ei - ej)) / (
+                4 * steps[i] * steps[j]
+            )
     return h
 
 
@@ -44,8 +46,12 @@ def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed
     best, evals = None, 0
     for k in range(restarts):
         zi = z0 if k == 0 else z0 + rng.normal(0.0, 0.05, z0.size)
-        res = minimize(neg, zi, method="Nelder-Mead",
-                       options={"maxiter": 200 * z0.size, "xatol": 1e-9, "fatol": 1e-9, "adaptive": True})
+        res = minimize(
+            neg,
+            zi,
+            method="Nelder-Mead",
+            options={"maxiter": 200 * z0.size, "xatol": 1e-9, "fatol": 1e-9, "adaptive": True},
+        )
         res = minimize(neg, res.x, method="BFGS", options={"gtol": 1e-6})
         evals += res.nfev
         if best is None or res.fun < best.fun:
@@ -65,8 +71,15 @@ def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed
     # delta method: d value / d z per parameter
     jac = np.array([np.exp(p.log_jacobian(float(v))) for p, v in zip(problem.space.priors, z)])
     sd = np.sqrt(np.diag(cov)) * jac
-    return {"z": z, "values": problem.values(z), "cov_z": cov, "sd": dict(zip(problem.space.names, sd)),
-            "log_post": -best.fun, "n_evals": evals, "hessian_ok": ok}
+    return {
+        "z": z,
+        "values": problem.values(z),
+        "cov_z": cov,
+        "sd": dict(zip(problem.space.names, sd)),
+        "log_post": -best.fun,
+        "n_evals": evals,
+        "hessian_ok": ok,
+    }
 
 
 def laplace_draws(problem: Posterior, z: np.ndarray, cov_z: np.ndarray, seed: int, n: int = 2000) -> np.ndarray:
@@ -78,10 +91,21 @@ def laplace_draws(problem: Posterior, z: np.ndarray, cov_z: np.ndarray, seed: in
 
 def map_result(problem: Posterior, method: str, fit: dict, seed: int) -> FitResult:
     """A FitResult of a MAP fit (`map_fit` or the casadi MAP's return) with its Laplace draws."""
-    return base_result(problem, method, fit["values"], sd=fit["sd"], z=fit["z"], cov_z=fit["cov_z"],
-                       log_post=fit["log_post"], approximate_draws=laplace_draws(problem, fit["z"], fit["cov_z"], seed),
-                       diagnostics={"converged": bool(np.isfinite(fit["log_post"])), "log_posterior": fit["log_post"],
-                                    "hessian_positive_definite": fit.get("hessian_ok", True)})
+    return base_result(
+        problem,
+        method,
+        fit["values"],
+        sd=fit["sd"],
+        z=fit["z"],
+        cov_z=fit["cov_z"],
+        log_post=fit["log_post"],
+        approximate_draws=laplace_draws(problem, fit["z"], fit["cov_z"], seed),
+        diagnostics={
+            "converged": bool(np.isfinite(fit["log_post"])),
+            "log_posterior": fit["log_post"],
+            "hessian_positive_definite": fit.get("hessian_ok", True),
+        },
+    )
 
 
 @register_estimator

@@ -46,7 +46,9 @@ logger = logging.getLogger(__name__)
 SEGMENTS = 4
 MAX_REL_SD = 0.10  # jackknife scatter of the frequency above which the identification is declined
 REL_THRESHOLD = 0.004  # a library term must carry >= 0.4 % of R'' (column-normalized STLSQ) to stay
-MAX_MISFIT = 0.3  # free response vs correlation function, relative rms (a true mode: 0.04-0.2; a steady line or band-passed noise: >= 0.35)
+# free response vs correlation function, relative rms (a true mode: 0.04-0.2; a steady line or band-passed
+# noise: >= 0.35)
+MAX_MISFIT = 0.3
 LIBRARY_DEGREE = 1  # [1, R, R']: the physics is linear; the constant is the candidate spurious term
 
 
@@ -112,8 +114,10 @@ def _identify(r_corr: np.ndarray, dt_unit: float) -> tuple[float, float, np.ndar
     rate = np.stack([dx, ddx], axis=1)[keep]
     # with normalized columns a coefficient is the term's L2 contribution: threshold it against R''
     threshold = REL_THRESHOLD * float(np.linalg.norm(rate[:, 1]))
-    model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=LIBRARY_DEGREE, include_bias=True),
-                     optimizer=ps.STLSQ(threshold=threshold, alpha=1e-8, normalize_columns=True))
+    model = ps.SINDy(
+        feature_library=ps.PolynomialLibrary(degree=LIBRARY_DEGREE, include_bias=True),
+        optimizer=ps.STLSQ(threshold=threshold, alpha=1e-8, normalize_columns=True),
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model.fit(state, t=tau[keep], x_dot=rate, feature_names=["R", "dR"])
@@ -148,15 +152,19 @@ def sindy_frame(series: Series, like: ResonanceModel, start: dict[str, float]) -
     k = like.key
     ratio = first_order_ratio(like, start)
     if ratio < 3.0:
-        raise SindyFailed(f"sindy: the pixel sees the tilt mostly at second order (first/second order = {ratio:.2g}; "
-                          "view on the lobe centre or a symmetric footprint), so the signal is not a scaled copy of "
-                          "the modal coordinate; use --method casadi")
+        raise SindyFailed(
+            f"sindy: the pixel sees the tilt mostly at second order (first/second order = {ratio:.2g}; "
+            "view on the lobe centre or a symmetric footprint), so the signal is not a scaled copy of "
+            "the modal coordinate; use --method casadi"
+        )
     t, y = series.time, series.intensity
     mask = np.isfinite(y)
     resid = np.where(mask, y - np.nanmean(y), 0.0)
     lines = like.drive_frequencies(start)
     if lines:
-        basis = np.concatenate([[np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)] for f in lines] + [[np.ones_like(t)]]).T
+        basis = np.concatenate(
+            [[np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)] for f in lines] + [[np.ones_like(t)]]
+        ).T
         coef = np.linalg.lstsq(basis[mask], resid[mask], rcond=None)[0]
         resid = np.where(mask, resid - basis @ coef, 0.0)
     f_g = start[k + "tilt_frequency"]
@@ -169,8 +177,10 @@ def sindy_frame(series: Series, like: ResonanceModel, start: dict[str, float]) -
     seg = np.array_split(np.arange(t.size), SEGMENTS)
     per_segment = min(len(s) for s in seg) * dt * f_g
     if per_segment < 5:
-        raise SindyFailed(f"sindy: a quarter of the record holds {per_segment:.1f} periods of the resonance guess "
-                          f"{f_g:g} Hz; the correlation function needs >= 5")
+        raise SindyFailed(
+            f"sindy: a quarter of the record holds {per_segment:.1f} periods of the resonance guess "
+            f"{f_g:g} Hz; the correlation function needs >= 5"
+        )
     if 1.0 / (f_g * dt) < 8:
         raise SindyFailed(f"sindy: the resonance guess {f_g:g} Hz has fewer than 8 samples per period")
     lags = int(min(10.0 / (f_g * dt), min(len(s) for s in seg) // 2))
@@ -192,12 +202,16 @@ def sindy_frame(series: Series, like: ResonanceModel, start: dict[str, float]) -
     elif not 0.0 < zeta < 1.0:
         problems.append(f"damping ratio {zeta:.3g} outside (0, 1)")
     elif sd_f > MAX_REL_SD * f_t:
-        problems.append(f"the frequency scatters by {sd_f / f_t:.0%} across quarters of the record (> {MAX_REL_SD:.0%})")
+        problems.append(
+            f"the frequency scatters by {sd_f / f_t:.0%} across quarters of the record (> {MAX_REL_SD:.0%})"
+        )
     if nonlinear:
         problems.append(f"nonlinear terms survived thresholding ({', '.join(nonlinear)})")
     if np.isfinite(misfit) and misfit > MAX_MISFIT:
-        problems.append(f"the identified mode's free response misses the correlation function by {misfit:.0%} "
-                        f"(> {MAX_MISFIT:.0%}): not a resonance")
+        problems.append(
+            f"the identified mode's free response misses the correlation function by {misfit:.0%} "
+            f"(> {MAX_MISFIT:.0%}): not a resonance"
+        )
     if problems:
         raise SindyFailed("sindy: identification declined: " + "; ".join(problems))
     equation = _equation(w * f_g, 2 * zeta * w * f_g)  # time unit 1/f_g -> s
@@ -208,8 +222,12 @@ def sindy_frame(series: Series, like: ResonanceModel, start: dict[str, float]) -
     for n in (k + "drive_amplitude", k + "drive_phase", k + "noise_rms", "noise.sigma"):
         if n in refit:
             values[n] = refit[n]
-    return {"values": values, "sd": {k + "tilt_frequency": float(sd_f), k + "tilt_damping_ratio": float(sd[1])},
-            "equation": equation, "misfit": misfit}
+    return {
+        "values": values,
+        "sd": {k + "tilt_frequency": float(sd_f), k + "tilt_damping_ratio": float(sd[1])},
+        "equation": equation,
+        "misfit": misfit,
+    }
 
 
 def _equation(w: float, c: float) -> str:
@@ -251,13 +269,15 @@ class SindyEstimator(Estimator):
 
     def estimate(self, posterior: Posterior, start: FitResult | None, **options: Any) -> FitResult:
         if not self.covers(posterior):
-            raise Unsupported("--method sindy: SINDy identifies a noise-driven resonance (a frame scene); this "
-                              "scene's motion is deterministic: use spectral, map, mcmc or auto")
+            raise Unsupported(
+                "--method sindy: SINDy identifies a noise-driven resonance (a frame scene); this "
+                "scene's motion is deterministic: use spectral, map, mcmc or auto"
+            )
         if start is None:
             from vibinverse.estimators.spectral import SpectralEstimator
 
             start = SpectralEstimator().fit(posterior)
-        names, priors = posterior.space.names, dict(zip(posterior.space.names, posterior.space.priors))
+        priors = dict(zip(posterior.space.names, posterior.space.priors))
         model = posterior.model
         starts = start.starts or [start.point]
         try:
@@ -265,11 +285,13 @@ class SindyEstimator(Estimator):
         except SindyFailed as exc:
             logger.info("%s; continuing without it", exc)
             info = {"status": "declined", "reason": str(exc)}
-            return base_result(posterior, "spectral", start.point, starts=starts,
-                               diagnostics={"converged": None, "sindy": info})
+            return base_result(
+                posterior, "spectral", start.point, starts=starts, diagnostics={"converged": None, "sindy": info}
+            )
         values = {n: priors[n].inside(res["values"].get(n, s)) for n, s in starts[0].items() if n in priors}
         sd = {n: v for n, v in res["sd"].items() if n in values}
         logger.info("sindy: %s", res["equation"])
         info = {"status": "ok", "equation": res["equation"], "misfit": res["misfit"]}
-        return base_result(posterior, "sindy", values, sd=sd, starts=[values, *starts],
-                           diagnostics={"converged": None, "sindy": info})
+        return base_result(
+            posterior, "sindy", values, sd=sd, starts=[values, *starts], diagnostics={"converged": None, "sindy": info}
+        )

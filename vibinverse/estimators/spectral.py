@@ -16,8 +16,10 @@ def ranked_starts(posterior: Posterior) -> list[dict[str, float]]:
     """The model's spectral starts inside the priors, best posterior first (which periodogram line
     is the drive: the candidates' exact posterior decides)."""
     space = posterior.space
-    starts = [{n: p.inside(g.get(n, p.centre())) for n, p in zip(space.names, space.priors)}
-              for g in posterior.model.guesses(posterior.bounds)]
+    starts = [
+        {n: p.inside(g.get(n, p.centre())) for n, p in zip(space.names, space.priors)}
+        for g in posterior.model.guesses(posterior.bounds)
+    ]
     score = [posterior.log_posterior_at(st) for st in starts]
     order = np.argsort([-(v if np.isfinite(v) else -np.inf) for v in score], kind="stable")
     return [starts[i] for i in order]

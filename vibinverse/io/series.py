@@ -49,8 +49,10 @@ class Series:
 
     def describe(self) -> str:
         kind = f"uniform at {self.fs:g} Hz" if self.uniform else f"non-uniform (median step {self.dt:g} s)"
-        return (f"{self.time.size} samples over {self.time[-1] - self.time[0]:g} s, {kind}; "
-                f"{self.n_gaps} gaps ({self.n_gaps / self.time.size:.1%})")
+        return (
+            f"{self.time.size} samples over {self.time[-1] - self.time[0]:g} s, {kind}; "
+            f"{self.n_gaps} gaps ({self.n_gaps / self.time.size:.1%})"
+        )
 
 
 def load_series(path: str | Path) -> Series:
@@ -100,7 +102,7 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray, dict | None]:
             if s.startswith("#"):
                 if s.startswith("# scene:"):
                     try:
-                        scene = json.loads(s[len("# scene:"):])
+                        scene = json.loads(s[len("# scene:") :])
                     except json.JSONDecodeError:
                         scene = None
                 continue
@@ -146,13 +148,18 @@ def check_resolves(series: Series, frequency_hz: float, what: str) -> None:
         raise InputError(f"{what}: {frequency_hz:g} Hz is at or above the Nyquist frequency {nyquist:g} Hz of the data")
     span = series.time[-1] - series.time[0]
     if frequency_hz * span < 3.0:
-        raise InputError(f"{what}: {frequency_hz:g} Hz needs at least {3.0 / frequency_hz:g} s of data "
-                         f"(3 cycles); the series spans {span:g} s")
+        raise InputError(
+            f"{what}: {frequency_hz:g} Hz needs at least {3.0 / frequency_hz:g} s of data "
+            f"(3 cycles); the series spans {span:g} s"
+        )
 
 
 def with_sampling(table: dict, series: Series) -> dict:
     """The scene table sampled as the data are (its [sampling] only serves the scene's checks)."""
     out = copy.deepcopy(table)
-    out["sampling"] = {"fs": series.fs, "duration": float(series.time[-1] - series.time[0]) + series.dt,
-                       "start": float(series.time[0])}
+    out["sampling"] = {
+        "fs": series.fs,
+        "duration": float(series.time[-1] - series.time[0]) + series.dt,
+        "start": float(series.time[0]),
+    }
     return out

@@ -40,8 +40,11 @@ def plot_series(path: Path, obs: Observation, title: str) -> None:
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6), constrained_layout=True)
     ax1.plot(obs.time, obs.intensity, lw=0.6, color="0.6", label="measured")
     ax1.plot(obs.time, obs.intensity_clean, lw=1.0, color="C0", label="clean")
-    ax1.set(xlabel="time (s)", ylabel="x(t) (1/sr per unit irradiance)",
-            title=f"{title}\nsensitivity S = {obs.sensitivity:.3e} (eq. 21)")
+    ax1.set(
+        xlabel="time (s)",
+        ylabel="x(t) (1/sr per unit irradiance)",
+        title=f"{title}\nsensitivity S = {obs.sensitivity:.3e} (eq. 21)",
+    )
     ax1.legend(loc="upper right")
     ac = obs.intensity_clean - obs.intensity_clean.mean()
     fs = 1.0 / np.median(np.diff(obs.time))

@@ -9,5 +9,13 @@ from vibinverse.models.base import MODELS, LineTest, SignalModel, build_model, m
 from vibinverse.models.deterministic import DeterministicModel
 from vibinverse.models.frame import FrameModel
 
-__all__ = ["MODELS", "DeterministicModel", "FrameModel", "LineTest", "SignalModel", "build_model", "model_class_for",
-           "register_model"]
+__all__ = [
+    "MODELS",
+    "DeterministicModel",
+    "FrameModel",
+    "LineTest",
+    "SignalModel",
+    "build_model",
+    "model_class_for",
+    "register_model",
+]

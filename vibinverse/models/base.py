@@ -102,8 +102,9 @@ class SignalModel(ABC):
         fittable = self.fittable()
         for name in names:
             if name not in fittable:
-                raise SceneError(f"fit: {name} cannot be fitted (yet); free parameters of this scene: "
-                                 f"{', '.join(sorted(fittable))}")
+                raise SceneError(
+                    f"fit: {name} cannot be fitted (yet); free parameters of this scene: {', '.join(sorted(fittable))}"
+                )
 
     def phase_period(self, name: str) -> float:
         """The period of a phase parameter as the data see it."""

@@ -17,9 +17,10 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import itertools
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -29,7 +30,7 @@ from forward.motion.base import ModalMotion
 from forward.reduce import DEFAULT_RTOL, chebyshev_surface, compile_scene, footprint_layout, taylor_surface_ac
 from forward.scene_file import scene_from_table
 from forward.validation import Table
-from vibinverse.errors import SceneError, Unsupported
+from vibinverse.errors import SceneError
 from vibinverse.fisher import response_fisher
 from vibinverse.io.scenes import scene_of
 from vibinverse.io.series import Series, with_sampling
@@ -81,7 +82,7 @@ class DeterministicModel(SignalModel):
     """Deterministic vibrations (plate roofs, ground waves; secs. 4.1, 4.3) in white sensor noise."""
 
     name = "deterministic"
-    scene_defaults = {"sun.irradiance": 1.0}  # forward.scene.Sun
+    scene_defaults: ClassVar[dict[str, float]] = {"sun.irradiance": 1.0}  # forward.scene.Sun
 
     @classmethod
     def describes(cls, table: dict) -> bool:
@@ -114,7 +115,7 @@ class DeterministicModel(SignalModel):
             raise SceneError("fit: the scene has no vibrating surface (a plate, rayleigh or frame motion)")
         self.shape_cache = _Bounded()
         for s in self.scene.surfaces:  # an absent phase is 0: write it, so that it can be set
-            m = (self.base["surfaces"][s.name].get("motion") or {})
+            m = self.base["surfaces"][s.name].get("motion") or {}
             if isinstance(s.motion, ModalMotion) and "frequency" in m and "phase" not in m:
                 m["phase"] = [0.0] * len(m["frequency"]) if isinstance(m["frequency"], list) else 0.0
         self.layout = footprint_layout(self.scene, self.shape_cache)
@@ -126,7 +127,10 @@ class DeterministicModel(SignalModel):
     def fittable(self) -> set[str]:
         """Every number of the scene but sampling, resolution and the noise model's constants; each
         line's frequency, amplitude and phase (a phase the scene leaves out is 0); noise.sigma."""
-        names = {n for n in numeric_keys(self.base) if not n.startswith(_NOT_FITTABLE)} | {"noise.sigma", "sun.irradiance"}
+        names = {n for n in numeric_keys(self.base) if not n.startswith(_NOT_FITTABLE)} | {
+            "noise.sigma",
+            "sun.irradiance",
+        }
         for line in self.lines():
             for n in line.names():
                 names |= {n, n[:-3]} if n.endswith("[0]") else {n}
@@ -146,7 +150,7 @@ class DeterministicModel(SignalModel):
         """Every vibration line of every moving surface, in scene order."""
         out = []
         for s in self.scene.surfaces:
-            m = (self.base["surfaces"][s.name].get("motion") or {})
+            m = self.base["surfaces"][s.name].get("motion") or {}
             if not isinstance(s.motion, ModalMotion):
                 continue
             k = f"surfaces.{s.name}.motion."
@@ -197,8 +201,11 @@ class DeterministicModel(SignalModel):
 
     def taylor_error(self, values: dict[str, float]) -> float:
         """The Taylor model's error bound at `values` (`forward.reduce`: cubic and quartic terms)."""
-        return float(compile_scene(scene_from_table(self.table_with(values)), self.t, force="taylor2",
-                                   shape_cache=self.shape_cache).error_bound())
+        return float(
+            compile_scene(
+                scene_from_table(self.table_with(values)), self.t, force="taylor2", shape_cache=self.shape_cache
+            ).error_bound()
+        )
 
     def table_with(self, values: dict[str, float]) -> dict:
         """The scene table with `values` set (noise.sigma is the likelihood's, not the scene's)."""
@@ -235,8 +242,9 @@ class DeterministicModel(SignalModel):
             scene = scene_from_table(self.table_with(values))
             if self.reduction == "compiled":
                 return compile_scene(scene, self.t, DEFAULT_RTOL, shape_cache=self.shape_cache).parts()
-            return self._taylor(footprint_layout(scene, self.shape_cache), [s.motion for s in scene.surfaces],
-                                scene.sun.irradiance)
+            return self._taylor(
+                footprint_layout(scene, self.shape_cache), [s.motion for s in scene.surfaces], scene.sun.irradiance
+            )
         motions = [s.motion for s in self.scene.surfaces]
         touched = {n.split(".")[1] for n in values if self.kinds.get(n) == "motion"}
         for k, s in enumerate(self.scene.surfaces):
@@ -278,7 +286,7 @@ class DeterministicModel(SignalModel):
         sub = dict(self.base["surfaces"][surface.name]["motion"])
         for n, v in values.items():
             if n.startswith(prefix):
-                set_value(sub, n[len(prefix):], v)
+                set_value(sub, n[len(prefix) :], v)
         table = Table(sub, prefix[:-1])
         return MOTION_KINDS[table.choice("kind", None, tuple(MOTION_KINDS))](table, surface.x, surface.y)
 
@@ -318,8 +326,10 @@ class DeterministicModel(SignalModel):
     def check_free(self, names: list[str]) -> None:
         super().check_free(names)
         if "noise.sigma" not in names and not self.variance(np.ones(1), {}) > 0:
-            raise SceneError("noise.sigma: the scene's sensor noise is 0, so no data fit it; set noise.sigma > 0 "
-                             "or free it (--free 'noise.sigma=loguniform(a, b)')")
+            raise SceneError(
+                "noise.sigma: the scene's sensor noise is 0, so no data fit it; set noise.sigma > 0 "
+                "or free it (--free 'noise.sigma=loguniform(a, b)')"
+            )
 
     def default_priors(self) -> dict[str, Prior]:
         """Each line's frequency (the whole band for one line; between the neighbours' midpoints for
@@ -335,17 +345,21 @@ class DeterministicModel(SignalModel):
         nyq = 0.5 * series.fs
         lo = max(3.0 / (series.time[-1] - series.time[0]), 1e-6)
         f0 = sorted(self.base_value(ln.frequency) for ln in lines)
-        same = [a for a, b in zip(f0, f0[1:]) if a == b]
+        same = [a for a, b in itertools.pairwise(f0) if a == b]
         if same:
-            raise SceneError(f"fit: two lines share the frequency {same[0]:g} Hz in the scene, so default priors cannot "
-                             "keep them apart; give their frequencies priors in [infer.free] or --free")
-        edges = [lo, *((a + b) / 2 for a, b in zip(f0, f0[1:])), nyq]
+            raise SceneError(
+                f"fit: two lines share the frequency {same[0]:g} Hz in the scene, so default priors cannot "
+                "keep them apart; give their frequencies priors in [infer.free] or --free"
+            )
+        edges = [lo, *((a + b) / 2 for a, b in itertools.pairwise(f0)), nyq]
         free: dict[str, Prior] = {}
         for line in lines:
             f, a = self.base_value(line.frequency), self.base_value(line.amplitude)
             if not a > 0:
-                raise SceneError(f"{line.amplitude}: the scene's value sets the scale of the default prior and must be "
-                                 "> 0 (or give the prior in [infer.free])")
+                raise SceneError(
+                    f"{line.amplitude}: the scene's value sets the scale of the default prior and must be "
+                    "> 0 (or give the prior in [infer.free])"
+                )
             i = f0.index(f)
             free[line.frequency] = Prior("uniform", (edges[i], edges[i + 1]))
             free[line.amplitude] = Prior("uniform", (0.0, 100.0 * a))
@@ -354,10 +368,14 @@ class DeterministicModel(SignalModel):
         gain = gain_from_level(series, self)
         if gain > 0:  # (NaN when the model or the data have no positive level: the gain stays fixed)
             free["sun.irradiance"] = Prior("loguniform", (gain / 2, gain * 2))
-        free["noise.sigma"] = Prior("loguniform", (max(1e-9 * scale, 1e-300), 10.0 * float(np.nanstd(series.intensity))))
+        free["noise.sigma"] = Prior(
+            "loguniform", (max(1e-9 * scale, 1e-300), 10.0 * float(np.nanstd(series.intensity)))
+        )
         space = ParameterSpace(free)
-        guesses = [{n: free[n].inside(g.get(n, free[n].centre())) for n in free}
-                   for g in self.guesses({n: p.bounds for n, p in free.items()})]
+        guesses = [
+            {n: free[n].inside(g.get(n, free[n].centre())) for n in free}
+            for g in self.guesses({n: p.bounds for n, p in free.items()})
+        ]
 
         def log_posterior(g: dict[str, float]) -> float:
             lp = space.log_prior_z(space.to_z(g))
@@ -382,8 +400,11 @@ class DeterministicModel(SignalModel):
             null = {line.amplitude: 0.0}
             if free_name(line.amplitude, set(values)) and line.amplitude not in values:
                 null[line.amplitude[:-3]] = 0.0
-            out.append(LineTest("vibration" if len(lines) == 1 else f"vibration_{i}", null,
-                                free_name(line.frequency, set(free))))
+            out.append(
+                LineTest(
+                    "vibration" if len(lines) == 1 else f"vibration_{i}", null, free_name(line.frequency, set(free))
+                )
+            )
         return out
 
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
@@ -410,11 +431,13 @@ class DeterministicModel(SignalModel):
         sd = float(np.sqrt(np.mean(self.variance(self.mean(values), values))))
         if bound > TAYLOR_TOLERANCE * sd:
             self.use_compiled()
-            return ({"error_bound_at_fit": bound}, "the Taylor model's error is not small against the noise at the "
-                    "fit; refitting with the compiled (Chebyshev) model")
+            return (
+                {"error_bound_at_fit": bound},
+                "the Taylor model's error is not small against the noise at the "
+                "fit; refitting with the compiled (Chebyshev) model",
+            )
         return {"error_bound_at_fit": bound}, None
 
 
 def _finite(v: float) -> float:
     return v if np.isfinite(v) else -np.inf
-

@@ -83,9 +83,11 @@ class CasadiResponseObjective:
         free = set(self.problem.space.names)
         probe = {}
         for ln in lines:
-            for name, value in ((ln.amplitude, 1.3 * (like.base_value(ln.amplitude) or 1e-3)),
-                                (ln.frequency, 1.01 * like.base_value(ln.frequency)),
-                                (ln.phase, like.base_value(ln.phase) + 0.7)):
+            for name, value in (
+                (ln.amplitude, 1.3 * (like.base_value(ln.amplitude) or 1e-3)),
+                (ln.frequency, 1.01 * like.base_value(ln.frequency)),
+                (ln.phase, like.base_value(ln.phase) + 0.7),
+            ):
                 if name in free or (name.endswith("[0]") and name[:-3] in free):
                     probe[name] = value
         if not probe:
@@ -94,8 +96,9 @@ class CasadiResponseObjective:
             if like.motion_with(surface, {name: v}).shape_key() != surface.motion.shape_key():
                 raise Unsupported(f"{name}: the motion's shapes depend on it")
         moved = like.motion_with(surface, probe)
-        expected = self._coordinates(lines, form, {**{n: like.base_value(n) for ln in lines for n in ln.names()}, **probe},
-                                     t, np)
+        expected = self._coordinates(
+            lines, form, {**{n: like.base_value(n) for ln in lines for n in ln.names()}, **probe}, t, np
+        )
         actual = moved.coefficients(t)
         if np.abs(expected - actual).max() > 1e-9 * max(np.abs(actual).max(), 1e-300):
             raise Unsupported(f"{', '.join(probe)}: the coordinates are not A (alpha cos + beta sin)(w t + phase)")
@@ -121,7 +124,9 @@ class CasadiResponseObjective:
         t = ca.DM(like.t)
         ac = 0.0
         for s in self.surfaces:
-            values = {n: (value(n) if value(n) is not None else like.base_value(n)) for ln in s["lines"] for n in ln.names()}
+            values = {
+                n: (value(n) if value(n) is not None else like.base_value(n)) for ln in s["lines"] for n in ln.names()
+            }
             q = self._coordinates(s["lines"], s["form"], values, t, ca)
             part = 0.0
             for i, qi in enumerate(q):

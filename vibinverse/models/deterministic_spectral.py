@@ -36,22 +36,28 @@ def gain_from_level(series: Series, like: DeterministicModel) -> float:
     return like.scene.sun.irradiance * float(np.nanmean(series.intensity)) / rest if rest > 0 else float("nan")
 
 
-def response_guesses(series: Series, like: DeterministicModel, bounds: dict[str, tuple[float, float]],
-                     n_candidates: int = 3) -> list[dict[str, float]]:
+def response_guesses(
+    series: Series, like: DeterministicModel, bounds: dict[str, tuple[float, float]], n_candidates: int = 3
+) -> list[dict[str, float]]:
     """Candidate starting values of the free parameters in `bounds` (names as the fit's), one per
     plausible frequency of the first free line; further lines take their strongest peak."""
     free = set(bounds)
     base: dict[str, float] = {}
     if "sun.irradiance" in free:
         base["sun.irradiance"] = gain_from_level(series, like)
-    lines = [ln for ln in like.lines() if free_name(ln.frequency, free) or free_name(ln.amplitude, free)
-             or free_name(ln.phase, free)]
+    lines = [
+        ln
+        for ln in like.lines()
+        if free_name(ln.frequency, free) or free_name(ln.amplitude, free) or free_name(ln.phase, free)
+    ]
     nyq = 0.5 * series.fs
     firsts: list[float | None] = [None]
     if lines and free_name(lines[0].frequency, free):
         band = bounds[free_name(lines[0].frequency, free)]
         peaks = line_candidates(series, band, n_candidates)
-        doubled = line_candidates(series, (2 * band[0], min(2 * band[1], nyq)), n_candidates) if 2 * band[0] < nyq else []
+        doubled = (
+            line_candidates(series, (2 * band[0], min(2 * band[1], nyq)), n_candidates) if 2 * band[0] < nyq else []
+        )
         firsts = list(dict.fromkeys([*peaks, *(p / 2 for p in doubled)]))
     out = []
     for f0 in firsts:
@@ -70,8 +76,9 @@ def response_guesses(series: Series, like: DeterministicModel, bounds: dict[str,
     return out
 
 
-def _line_guess(series: Series, like: DeterministicModel, line: Line, bounds: dict, guess: dict,
-                f: float | None, nyq: float) -> None:
+def _line_guess(
+    series: Series, like: DeterministicModel, line: Line, bounds: dict, guess: dict, f: float | None, nyq: float
+) -> None:
     """Frequency, amplitude and phase of one line into `guess` (canonical names)."""
     free = set(bounds)
     fname = free_name(line.frequency, free)
@@ -85,8 +92,15 @@ def _line_guess(series: Series, like: DeterministicModel, line: Line, bounds: di
     t, y = series.time, series.intensity
     a_ref = like.base_value(line.amplitude) or 1e-3
     others = {ln.amplitude: 0.0 for ln in like.lines() if ln != line}
-    probe = like.mean({**_as_free(guess, like, free, keep_all=True), **others,
-                       line.frequency: f, line.amplitude: a_ref, line.phase: 0.0})
+    probe = like.mean(
+        {
+            **_as_free(guess, like, free, keep_all=True),
+            **others,
+            line.frequency: f,
+            line.amplitude: a_ref,
+            line.phase: 0.0,
+        }
+    )
     first, second = harmonics(t, probe, f, nyq)
     data1, data2 = harmonics(t, y, f, nyq)
     if first[0] >= second[0] or second[0] == 0.0:  # first order: x ~ a
@@ -105,8 +119,9 @@ def _line_guess(series: Series, like: DeterministicModel, line: Line, bounds: di
         guess[line.phase] = float(centre + (guess[line.phase] - centre + period / 2) % period - period / 2)
 
 
-def _as_free(guess: dict[str, float], like: DeterministicModel, free: set[str], keep_all: bool = False
-             ) -> dict[str, float]:
+def _as_free(
+    guess: dict[str, float], like: DeterministicModel, free: set[str], keep_all: bool = False
+) -> dict[str, float]:
     """`guess` under the fit's names (plain names for list first elements where the fit uses them);
     keep_all keeps values that are not free (as a probe of the model needs them)."""
     out = {}

@@ -13,6 +13,7 @@ at the paper's tilts). Gaps (NaN samples) are skipped by the filter.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -26,9 +27,9 @@ from vibinverse.errors import SceneError, Unsupported
 from vibinverse.fisher import frame_fisher
 from vibinverse.io.scenes import scene_of
 from vibinverse.io.series import Series, with_sampling
+from vibinverse.kalman import log_likelihood, njit
 from vibinverse.models.base import LineTest, SignalModel, register_model
 from vibinverse.models.frame_spectral import frame_guess, frame_guesses
-from vibinverse.kalman import log_likelihood, njit
 from vibinverse.priors import Prior
 from vibinverse.scene_keys import get_value, numeric_keys, set_value
 
@@ -106,8 +107,10 @@ class FrameModel(SignalModel):
         self.roof = frame_surface(self.base)
         others = [n for n, s in self.base["surfaces"].items() if n != self.roof and (s.get("motion") or {})]
         if others:
-            raise SceneError(f"fit: surfaces.{others[0]}.motion: a frame scene's likelihood holds every other surface at "
-                             "rest; remove that motion (or fit it in a scene without the frame)")
+            raise SceneError(
+                f"fit: surfaces.{others[0]}.motion: a frame scene's likelihood holds every other surface at "
+                "rest; remove that motion (or fit it in a scene without the frame)"
+            )
         self.series = series
         self.t = series.time
         self.dt = series.dt
@@ -122,10 +125,12 @@ class FrameModel(SignalModel):
         self._unit = linearize(FrameParameters(self.mass, self.lx, self.ly, 1.0, 1.0, 1.0, 1.0))
         check = linearize(FrameParameters(self.mass, self.lx, self.ly, 2.0, 3.0, 5.0, 7.0))
         rows = list(TILT_MODES)
-        if not (np.allclose(check.stiffness[rows], 2.0 * self._unit.stiffness[rows])
-                and np.allclose(check.force_spring[rows], 2.0 * self._unit.force_spring[rows])
-                and np.allclose(check.damping[rows], 3.0 * self._unit.damping[rows])
-                and np.allclose(check.force_damper[rows], 3.0 * self._unit.force_damper[rows])):
+        if not (
+            np.allclose(check.stiffness[rows], 2.0 * self._unit.stiffness[rows])
+            and np.allclose(check.force_spring[rows], 2.0 * self._unit.force_spring[rows])
+            and np.allclose(check.damping[rows], 3.0 * self._unit.damping[rows])
+            and np.allclose(check.force_damper[rows], 3.0 * self._unit.force_damper[rows])
+        ):
             raise RuntimeError("frame likelihood: the tilt rows are not linear in (k1, b1)")
         self._fixed: dict[str, float] = {}  # scene values read once (a likelihood call is a hot path)
         self._geometry = self._geometry_names()
@@ -134,8 +139,13 @@ class FrameModel(SignalModel):
         d1, d2 = plane[0] / np.linalg.norm(plane[0]), plane[1] / np.linalg.norm(plane[1])
         corner = slice(3 * int(m.get("drive_corner", 0)), 3 * int(m.get("drive_corner", 0)) + 3)
         # unit-frame force rows at the drive corner, applied to d1 - i d2 (`Drive.phasors`)
-        self._corner_force = {i: (self._unit.force_spring[i, corner] @ (d1 - 1j * d2),
-                                  self._unit.force_damper[i, corner] @ (d1 - 1j * d2)) for i in TILT_MODES}
+        self._corner_force = {
+            i: (
+                self._unit.force_spring[i, corner] @ (d1 - 1j * d2),
+                self._unit.force_damper[i, corner] @ (d1 - 1j * d2),
+            )
+            for i in TILT_MODES
+        }
         step = (self.t[-1] - self.t[0]) / max(self.t.size - 1, 1)  # the grid's step, to the last ulp
         on_grid = np.max(np.abs(self.t - (self.t[0] + np.arange(self.t.size) * step))) <= 1e-9 * step
         self._grid = float(step) if on_grid and self.t.size > 1 else None
@@ -143,14 +153,17 @@ class FrameModel(SignalModel):
 
     def components(self, values: dict[str, float]) -> Components:
         """Mean signal and state-space matrices at the given parameter values (others from the base)."""
-        val = lambda name, default=None: values.get(self.key + name, default if default is not None else
-                                                     self.base_value(self.key + name))
+        val = lambda name, default=None: values.get(
+            self.key + name, default if default is not None else self.base_value(self.key + name)
+        )
         m = self.base["surfaces"][self.roof]["motion"]
         tilt = self._tilt_rows(val("tilt_frequency"), val("tilt_damping_ratio"))
         x0, jac, hs = self.observation(values)
         if self.n_lines:
-            f, a, ph = (np.array([self.line_value(values, name, i) for i in range(self.n_lines)])
-                        for name in ("drive_frequency", "drive_amplitude", "drive_phase"))
+            f, a, ph = (
+                np.array([self.line_value(values, name, i) for i in range(self.n_lines)])
+                for name in ("drive_frequency", "drive_amplitude", "drive_phase")
+            )
             w = 2 * np.pi * f
             qx, qy = self._tilt_phasors(tilt, w, a * np.exp(1j * ph))
             mean = self._drive_mean(w, qx, qy, x0, jac, hs)
@@ -176,8 +189,16 @@ class FrameModel(SignalModel):
         """Scene values the observation depends on and the frame's dynamics do not: sun, view,
         optics, footprint, the other surfaces, the gain sun.irradiance. (The roof's own extents set
         its inertia and are not among them.)"""
-        skip = ("sampling.", "infer.", "title", "noise.", "footprint.resolution", f"surfaces.{self.roof}.motion.",
-                f"surfaces.{self.roof}.x", f"surfaces.{self.roof}.y")
+        skip = (
+            "sampling.",
+            "infer.",
+            "title",
+            "noise.",
+            "footprint.resolution",
+            f"surfaces.{self.roof}.motion.",
+            f"surfaces.{self.roof}.x",
+            f"surfaces.{self.roof}.y",
+        )
         return {n for n in numeric_keys(self.base) if not n.startswith(skip)} | {"sun.irradiance"}
 
     def observation(self, values: dict[str, float]) -> tuple[float, np.ndarray, np.ndarray]:
@@ -205,11 +226,15 @@ class FrameModel(SignalModel):
         params = FrameParameters.from_modal(self.lx, self.ly, self.mass, tilt=(f_tilt, zeta), lateral=(1.0, 0.0))
         k1, b1 = params.k1, params.b1
         u = self._unit
-        return {"k1": k1, "b1": b1, "stiffness": {i: k1 * u.stiffness[i] for i in TILT_MODES},
-                "damping": {i: b1 * u.damping[i] for i in TILT_MODES},
-                "mass": {i: u.mass[i] for i in TILT_MODES},
-                "force_spring": {i: k1 * u.force_spring[i] for i in TILT_MODES},
-                "force_damper": {i: b1 * u.force_damper[i] for i in TILT_MODES}}
+        return {
+            "k1": k1,
+            "b1": b1,
+            "stiffness": {i: k1 * u.stiffness[i] for i in TILT_MODES},
+            "damping": {i: b1 * u.damping[i] for i in TILT_MODES},
+            "mass": {i: u.mass[i] for i in TILT_MODES},
+            "force_spring": {i: k1 * u.force_spring[i] for i in TILT_MODES},
+            "force_damper": {i: b1 * u.force_damper[i] for i in TILT_MODES},
+        }
 
     def _tilt_phasors(self, tilt: dict, w: np.ndarray, amp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Complex steady-state amplitudes of rx and ry per drive line (exact, as
@@ -222,8 +247,9 @@ class FrameModel(SignalModel):
             out.append(force / (tilt["stiffness"][i] - w * w * tilt["mass"][i] + 1j * w * tilt["damping"][i]))
         return out[0], out[1]
 
-    def _drive_mean(self, w: np.ndarray, qx: np.ndarray, qy: np.ndarray, x0: float, jac: np.ndarray,
-                    hs: np.ndarray) -> np.ndarray:
+    def _drive_mean(
+        self, w: np.ndarray, qx: np.ndarray, qy: np.ndarray, x0: float, jac: np.ndarray, hs: np.ndarray
+    ) -> np.ndarray:
         """x0 + J g + g'Hg/2 with g = (-ry, rx), r = Re(q e^{i w t}) summed over the lines."""
         if self._grid is not None:  # uniform grid: the compiled kernel (rotations, re-anchored)
             out = np.empty(self.t.size)
@@ -238,8 +264,20 @@ class FrameModel(SignalModel):
         """The names this likelihood reads: frame dynamics, drive lines, base noise, sensor noise,
         and the geometry and optics of the observation (`observation`)."""
         k = self.key
-        names = {k + n for n in ("tilt_frequency", "tilt_damping_ratio", "lateral_frequency", "lateral_damping_ratio",
-                                 "noise_rms")} | {"noise.sigma"} | self._geometry
+        names = (
+            {
+                k + n
+                for n in (
+                    "tilt_frequency",
+                    "tilt_damping_ratio",
+                    "lateral_frequency",
+                    "lateral_damping_ratio",
+                    "noise_rms",
+                )
+            }
+            | {"noise.sigma"}
+            | self._geometry
+        )
         lines = len(self.base["surfaces"][self.roof]["motion"].get("drive_frequency", []) or [])
         for n in ("drive_frequency", "drive_amplitude", "drive_phase"):
             names |= {f"{k}{n}[{i}]" for i in range(lines)} | ({k + n} if lines else set())
@@ -296,8 +334,10 @@ class FrameModel(SignalModel):
         """The drive line (its amplitude to 0) and the tilt resonance (the base noise to 0)."""
         k = self.key
         out = []
-        for label, name, freq in (("drive", "drive_amplitude", "drive_frequency"),
-                                  ("resonance", "noise_rms", "tilt_frequency")):
+        for label, name, freq in (
+            ("drive", "drive_amplitude", "drive_frequency"),
+            ("resonance", "noise_rms", "tilt_frequency"),
+        ):
             if k + name in values:
                 out.append(LineTest(label, {k + name: 0.0}, k + freq))
         return out
@@ -332,10 +372,8 @@ class FrameModel(SignalModel):
         out = {}
         k = self.key
         for n in (k + "tilt_frequency", k + "tilt_damping_ratio", k + "noise_rms", "noise.sigma"):
-            try:
+            with contextlib.suppress(ForwardSceneError):
                 out[n] = self.base_value(n)
-            except ForwardSceneError:
-                pass
         if self.n_lines:
             out[k + "drive_frequency"] = self.line_value({}, "drive_frequency", 0)
         return out
@@ -380,12 +418,16 @@ def stationary_2x2_entries(phi: Any, q: Any) -> tuple[Any, Any, Any]:
     rhs = [q[0, 0], q[0, 1], q[1, 1]]
 
     def det3(k):
-        return (k[0][0] * (k[1][1] * k[2][2] - k[1][2] * k[2][1]) - k[0][1] * (k[1][0] * k[2][2] - k[1][2] * k[2][0])
-                + k[0][2] * (k[1][0] * k[2][1] - k[1][1] * k[2][0]))
+        return (
+            k[0][0] * (k[1][1] * k[2][2] - k[1][2] * k[2][1])
+            - k[0][1] * (k[1][0] * k[2][2] - k[1][2] * k[2][0])
+            + k[0][2] * (k[1][0] * k[2][1] - k[1][1] * k[2][0])
+        )
 
     den = det3(m)
-    p11, p12, p22 = (det3([[rhs[r] if col == j else m[r][col] for col in range(3)] for r in range(3)]) / den
-                     for j in range(3))
+    p11, p12, p22 = (
+        det3([[rhs[r] if col == j else m[r][col] for col in range(3)] for r in range(3)]) / den for j in range(3)
+    )
     return p11, p12, p22
 
 

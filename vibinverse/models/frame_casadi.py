@@ -99,10 +99,18 @@ class CasadiFrameObjective:
                 q[i] = q[i] + qr * ca.cos(wd * t) - qi * ca.sin(wd * t)
         gx, gy = -q[4], q[3]
         jac, hs = self.like.jac, self.like.hess
-        mean = self.like.x0 + jac[0] * gx + jac[1] * gy + 0.5 * (hs[0, 0] * gx * gx + 2 * hs[0, 1] * gx * gy + hs[1, 1] * gy * gy)
+        mean = (
+            self.like.x0
+            + jac[0] * gx
+            + jac[1] * gy
+            + 0.5 * (hs[0, 0] * gx * gx + 2 * hs[0, 1] * gx * gy + hs[1, 1] * gy * gy)
+        )
         rms = self._value(values, "noise_rms")
-        sigma = values["noise.sigma"] if "noise.sigma" in values else (
-            get_value(self.like.base, "noise.sigma") if "noise" in self.like.base else 0.0)  # as FrameLikelihood
+        sigma = (
+            values["noise.sigma"]
+            if "noise.sigma" in values
+            else (get_value(self.like.base, "noise.sigma") if "noise" in self.like.base else 0.0)
+        )  # as FrameLikelihood
         phi, qm, p0 = self._tilt_blocks(w, zeta, k1, rms)
         # the data enter as a parameter, so that one compiled solver serves many series of one design
         y = ca.MX.sym("y", self.like.t.size)
@@ -130,8 +138,9 @@ class CasadiFrameObjective:
         wd = w * s
         e = ca.exp(-zeta * w * dt)
         c, sn = ca.cos(wd * dt), ca.sin(wd * dt)
-        blk = ca.vertcat(ca.horzcat(e * (c + zeta / s * sn), e * sn / wd),
-                         ca.horzcat(-e * w * w * sn / wd, e * (c - zeta / s * sn)))
+        blk = ca.vertcat(
+            ca.horzcat(e * (c + zeta / s * sn), e * sn / wd), ca.horzcat(-e * w * w * sn / wd, e * (c - zeta / s * sn))
+        )
         for b, i in enumerate(self.seen):
             m = self.unit.mass[i]
             # Gamma = A^-1 (Phi - I) B, A = [[0, 1], [-w^2, -2 zeta w]], B = [0, 1/m]
@@ -160,8 +169,11 @@ class CasadiFrameObjective:
         acc = ca.SX.sym("acc")
         xn = ca.mtimes(ph, xu)
         pn = ca.mtimes([ph, pu, ph.T]) + qs
-        step = ca.Function("kf", [ca.vertcat(x, ca.reshape(p, n * n, 1), acc), yk, mk, ph, qs, rs],
-                           [ca.vertcat(xn, ca.reshape(pn, n * n, 1), acc + ll)])
+        step = ca.Function(
+            "kf",
+            [ca.vertcat(x, ca.reshape(p, n * n, 1), acc), yk, mk, ph, qs, rs],
+            [ca.vertcat(xn, ca.reshape(pn, n * n, 1), acc + ll)],
+        )
         run = step.mapaccum("kf_all", resid.shape[0])
         init = ca.vertcat(ca.MX.zeros(n), ca.reshape(p0, n * n, 1), 0)
         out = run(init, resid.T, mask.T, phi, qm, r)

@@ -18,8 +18,9 @@ if TYPE_CHECKING:
     from vibinverse.models.frame import FrameModel
 
 
-def frame_guesses(series: Series, like: FrameModel, bounds: dict[str, tuple[float, float]] | None = None
-                  ) -> list[dict[str, float]]:
+def frame_guesses(
+    series: Series, like: FrameModel, bounds: dict[str, tuple[float, float]] | None = None
+) -> list[dict[str, float]]:
     """Candidate initial values, one per plausible drive line (most steady first). Further drive
     lines (`drive_frequency[i]`, i >= 1) with a prior in `bounds` start at the strongest steady
     peak inside that prior, their amplitude and phase calibrated through the forward model."""
@@ -33,8 +34,9 @@ def frame_guesses(series: Series, like: FrameModel, bounds: dict[str, tuple[floa
     return guesses
 
 
-def _extra_lines(series: Series, like: FrameModel, bounds: dict[str, tuple[float, float]],
-                 guess: dict[str, float]) -> None:
+def _extra_lines(
+    series: Series, like: FrameModel, bounds: dict[str, tuple[float, float]], guess: dict[str, float]
+) -> None:
     k = like.key
     n_lines = like.n_lines
     t, y = series.time, series.intensity
@@ -58,8 +60,13 @@ def _extra_lines(series: Series, like: FrameModel, bounds: dict[str, tuple[float
         guess[f"{k}drive_phase[{i}]"] = float(np.angle(np.exp(1j * (ph_sig - ph_m))))
 
 
-def frame_guess(series: Series, like: FrameModel, bounds: dict[str, tuple[float, float]] | None = None,
-                f_d: float | None = None, resonance: tuple[float, float] | None = None) -> dict[str, float]:
+def frame_guess(
+    series: Series,
+    like: FrameModel,
+    bounds: dict[str, tuple[float, float]] | None = None,
+    f_d: float | None = None,
+    resonance: tuple[float, float] | None = None,
+) -> dict[str, float]:
     """Initial values of the frame parameters from the spectrum (names as in FrameModel), given
     the drive line f_d (None: no drive), searching the resonance within its prior `bounds`, or
     taking it as given (`resonance` = (frequency, damping ratio), e.g. from SINDy)."""

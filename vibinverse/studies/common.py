@@ -14,8 +14,9 @@ from forward.reduce import compile_scene
 from forward.render import pixel_signal, sensitivity
 from forward.scene import Scene
 from forward.scene_file import load_scene
-from vibinverse.io.builtin import builtin_scene
 from vibinverse.io.atomic import write_all
+from vibinverse.io.builtin import builtin_scene
+
 
 def scene_path(name: str) -> Path:
     """A built-in scene by name (see vibinverse.builtin)."""
@@ -33,8 +34,9 @@ def signal(scene: Scene, rtol: float | None, seed: int = 0) -> np.ndarray:
     return pixel_signal(scene, seed=seed) if rtol is None else compile_scene(scene, rtol=rtol, seed=seed).signal()
 
 
-def sweep(name: str, base: Sequence[str], variants: Sequence[Sequence[str]], rtol: float | None = 1e-6,
-          seed: int = 0) -> np.ndarray:
+def sweep(
+    name: str, base: Sequence[str], variants: Sequence[Sequence[str]], rtol: float | None = 1e-6, seed: int = 0
+) -> np.ndarray:
     """Sensitivity (21) of scene `name` with `base` overrides, for each list of extra overrides."""
     out = []
     for extra in variants:
@@ -43,12 +45,14 @@ def sweep(name: str, base: Sequence[str], variants: Sequence[Sequence[str]], rto
     return np.array(out)
 
 
-def write_study(outdir: Path, name: str, curve: dict[str, np.ndarray], summary: dict[str, Any],
-                plot: Callable[[Any], None]) -> None:
+def write_study(
+    outdir: Path, name: str, curve: dict[str, np.ndarray], summary: dict[str, Any], plot: Callable[[Any], None]
+) -> None:
     """NAME.csv (columns of `curve`, padded with empty cells), NAME.json and NAME.png, all or nothing.
 
     `plot(fig)` draws on a fresh matplotlib figure.
     """
+
     def csv(path: Path) -> None:
         cols = list(curve)
         n = max(len(v) for v in curve.values())

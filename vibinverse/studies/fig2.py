@@ -22,10 +22,13 @@ def fig2(outdir: Path, quick: bool = False) -> str:
     cells = (np.arange(12) + 0.5) * L / 12
     cx, cy = np.meshgrid(cells, cells, indexing="ij")
     _, cwx, cwy = poisson_shape(cx.ravel(), cy.ravel(), L, L)
-    summary = {"max_displacement_m": float(u.max()), "max_gradient": float(grad.max()),
-               "max_gradient_12x12_cell_centres": float(q * np.hypot(cwx, cwy).max()),
-               "paper": {"max_displacement_m": 6e-6, "max_gradient": 1e-5},
-               "case": {"side_m": L, "omega_rad_s": 2 * np.pi * F, "density": RHO, "A0_m": A0, "G_Pa": G}}
+    summary = {
+        "max_displacement_m": float(u.max()),
+        "max_gradient": float(grad.max()),
+        "max_gradient_12x12_cell_centres": float(q * np.hypot(cwx, cwy).max()),
+        "paper": {"max_displacement_m": 6e-6, "max_gradient": 1e-5},
+        "case": {"side_m": L, "omega_rad_s": 2 * np.pi * F, "density": RHO, "A0_m": A0, "G_Pa": G},
+    }
     mid = n // 2
     curve = {"x_m": xs, "u_mid_m": u[:, mid], "grad_mid": grad[:, mid]}
 
@@ -39,5 +42,8 @@ def fig2(outdir: Path, quick: bool = False) -> str:
         ax2.set_title(f"max {summary['max_gradient']:.3g} (edge midpoints)")
 
     write_study(outdir, "fig2", curve, summary, plot)
-    return (f"fig2: max displacement {summary['max_displacement_m'] * 1e6:.2f} um (paper ~6), max gradient "
-            f"{summary['max_gradient']:.3g} (paper ~1e-5; 12x12 cell centres {summary['max_gradient_12x12_cell_centres']:.3g})")
+    return (
+        f"fig2: max displacement {summary['max_displacement_m'] * 1e6:.2f} um (paper ~6), max gradient "
+        f"{summary['max_gradient']:.3g} (paper ~1e-5; "
+        f"12x12 cell centres {summary['max_gradient_12x12_cell_centres']:.3g})"
+    )

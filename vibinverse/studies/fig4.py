@@ -39,9 +39,9 @@ def frequency_response(params: FrameParameters, freqs: np.ndarray, drive: Drive)
 
 
 def fig4(outdir: Path, quick: bool = False, params: FrameParameters = PAPER) -> str:
-    freqs = np.arange(1, int(round(FS / 2 / F_MIN))) * F_MIN  # 0.1 .. 99.9 Hz
+    freqs = np.arange(1, round(FS / 2 / F_MIN)) * F_MIN  # 0.1 .. 99.9 Hz
     drive = Drive(freqs, np.full(freqs.size, TOTAL_AMPLITUDE / freqs.size))
-    t = np.arange(int(round(FS / F_MIN))) / FS  # one 10 s period
+    t = np.arange(round(FS / F_MIN)) / FS  # one 10 s period
     q, _ = steady_state(linearize(params), drive, t)
     curve_f = np.linspace(0.0, FS / 2, t.size)
     gain = frequency_response(params, np.maximum(curve_f, 1e-6), drive)
@@ -50,8 +50,12 @@ def fig4(outdir: Path, quick: bool = False, params: FrameParameters = PAPER) -> 
     for name, g in gain.items():  # the grid peak, refined on the analytic response
         idx, _ = find_peaks(g)
         f0 = curve_f[idx[np.argmax(g[idx])]]
-        best = minimize_scalar(lambda f: -frequency_response(params, np.array([f]), drive)[name][0],
-                               bounds=(f0 - df, f0 + df), method="bounded", options={"xatol": 1e-7})
+        best = minimize_scalar(
+            lambda f: -frequency_response(params, np.array([f]), drive)[name][0],
+            bounds=(f0 - df, f0 + df),
+            method="bounded",
+            options={"xatol": 1e-7},
+        )
         peaks[name] = float(best.x)
     modal = params.modal()
     summary = {
@@ -59,8 +63,13 @@ def fig4(outdir: Path, quick: bool = False, params: FrameParameters = PAPER) -> 
         "damping_ratios": {m: modal[m][1] for m in ("vertical", "lateral", "tilt", "twist")},
         "spectral_peaks_hz": peaks,
         "paper_hz": {"vertical": 2.0, "lateral": 4.0, "tilt": 3.5, "twist": 6.9},
-        "fs_hz": FS, "drive": {"corner": 0, "plane": "x-z", "frequencies_hz": [F_MIN, float(freqs[-1])],
-                               "total_amplitude_m": TOTAL_AMPLITUDE},
+        "fs_hz": FS,
+        "drive": {
+            "corner": 0,
+            "plane": "x-z",
+            "frequencies_hz": [F_MIN, float(freqs[-1])],
+            "total_amplitude_m": TOTAL_AMPLITUDE,
+        },
     }
     series = {"x_cm_m": q[:, 0], "z_cm_m": q[:, 2], "tilt_rad": q[:, 3]}
     curve = {"time_s": t, **series, "frequency_hz": curve_f, **{f"{k}_per_m": v for k, v in gain.items()}}
@@ -80,6 +89,8 @@ def fig4(outdir: Path, quick: bool = False, params: FrameParameters = PAPER) -> 
 
     write_study(outdir, "fig4", curve, summary, plot)
     r = summary["resonances_hz"]
-    return (f"fig4: resonances vertical {r['vertical']:.3f}, lateral {r['lateral']:.3f}, tilt {r['tilt']:.3f}, "
-            f"twist {r['twist']:.3f} Hz; peaks x_cm {peaks['x_cm']:.2f}, z_cm {peaks['z_cm']:.2f}, "
-            f"tilt {peaks['tilt']:.2f} Hz")
+    return (
+        f"fig4: resonances vertical {r['vertical']:.3f}, lateral {r['lateral']:.3f}, tilt {r['tilt']:.3f}, "
+        f"twist {r['twist']:.3f} Hz; peaks x_cm {peaks['x_cm']:.2f}, z_cm {peaks['z_cm']:.2f}, "
+        f"tilt {peaks['tilt']:.2f} Hz"
+    )

@@ -21,18 +21,26 @@ def fig6(outdir: Path, quick: bool = False) -> str:
     cont = float(np.abs(m.displacement(np.nextafter(R, 0.0), tt) - m.displacement(R, tt)).max() / A0)
     env = lambda x: np.hypot(m.displacement(x, 0.0), m.displacement(x, 0.25 / F))
     decay = float(np.log(env(4000.0) / env(1000.0)) / np.log(4.0))
-    summary = {"wavelength_m": float(m.wavelength()[0]), "continuity_error": cont, "far_field_exponent": decay,
-               "case": {"frequency_hz": F, "radius_m": R, "wave_speed_m_s": V, "amplitude_m": A0}}
+    summary = {
+        "wavelength_m": float(m.wavelength()[0]),
+        "continuity_error": cont,
+        "far_field_exponent": decay,
+        "case": {"frequency_hz": F, "radius_m": R, "wave_speed_m_s": V, "amplitude_m": A0},
+    }
 
     def plot(fig):
         ax = fig.subplots()
-        for (k, u), t in zip(slices.items(), times):
+        for (_k, u), t in zip(slices.items(), times):
             ax.plot(r, u * 1e3, label=f"t = {t * 1e3:.1f} ms")
         ax.axvline(R, color="0.5", ls=":", lw=0.8)
-        ax.set(xlabel="r (m)", ylabel="u (mm)", title=f"Rayleigh waves, f = {F:g} Hz, R = {R:g} m, "
-               f"wavelength {summary['wavelength_m']:g} m")
+        ax.set(
+            xlabel="r (m)",
+            ylabel="u (mm)",
+            title=f"Rayleigh waves, f = {F:g} Hz, R = {R:g} m, wavelength {summary['wavelength_m']:g} m",
+        )
         ax.legend()
 
     write_study(outdir, "fig6", {"r_m": r, **slices}, summary, plot)
-    return (f"fig6: wavelength {summary['wavelength_m']:g} m, continuity error {cont:.1e} of A0, "
-            f"far field ~ r^{decay:.3f}")
+    return (
+        f"fig6: wavelength {summary['wavelength_m']:g} m, continuity error {cont:.1e} of A0, far field ~ r^{decay:.3f}"
+    )

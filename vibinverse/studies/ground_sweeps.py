@@ -28,8 +28,11 @@ def fig14(outdir: Path, quick: bool = False) -> str:
         ax = fig.subplots()
         ax.loglog(inc, s, "o-", ms=3)
         ax.axhline(1e-4, color="0.6", ls=":", label="threshold 1e-4")
-        ax.set(xlabel="sun inclination (rad)", ylabel="sensitivity S (eq. 21)",
-               title="ground, 50 m quadrant footprint (paper Fig. 14)")
+        ax.set(
+            xlabel="sun inclination (rad)",
+            ylabel="sensitivity S (eq. 21)",
+            title="ground, 50 m quadrant footprint (paper Fig. 14)",
+        )
         ax.legend()
 
     write_study(outdir, "fig14", {"sun_inclination_rad": inc, "sensitivity": s}, summary, plot)
@@ -38,20 +41,29 @@ def fig14(outdir: Path, quick: bool = False) -> str:
 
 def fig15(outdir: Path, quick: bool = False) -> str:
     widths = np.linspace(2.0, 80.0, 27 if quick else 79)
-    s = sweep(SCENE, _base(quick), [[f"footprint.x=[0, {float(w)!r}]", f"footprint.y=[0, {float(w)!r}]"] for w in widths])
+    s = sweep(
+        SCENE, _base(quick), [[f"footprint.x=[0, {float(w)!r}]", f"footprint.y=[0, {float(w)!r}]"] for w in widths]
+    )
     best = interior_peak(widths, s)
-    summary = {"fov_width_m": widths, "sensitivity": s, "best_width_m": best,
-               "best_over_wavelength": best / WAVELENGTH, "max_sensitivity": float(s.max()),
-               "wavelength_m": WAVELENGTH}
+    summary = {
+        "fov_width_m": widths,
+        "sensitivity": s,
+        "best_width_m": best,
+        "best_over_wavelength": best / WAVELENGTH,
+        "max_sensitivity": float(s.max()),
+        "wavelength_m": WAVELENGTH,
+    }
 
     def plot(fig):
         ax = fig.subplots()
         ax.plot(widths, s, "o-", ms=3)
         ax.axvline(WAVELENGTH / 3, color="0.6", ls=":", label="lambda_R / 3")
-        ax.set(xlabel="footprint width (m)", ylabel="sensitivity S (eq. 21)",
-               title="ground, sun at 0.01 rad (paper Fig. 15)")
+        ax.set(
+            xlabel="footprint width (m)",
+            ylabel="sensitivity S (eq. 21)",
+            title="ground, sun at 0.01 rad (paper Fig. 15)",
+        )
         ax.legend()
 
     write_study(outdir, "fig15", {"fov_width_m": widths, "sensitivity": s}, summary, plot)
-    return (f"fig15: maximum S = {s.max():.2e} at {best:.1f} m = {best / WAVELENGTH:.2f} lambda_R "
-            f"(paper ~5e-3 at ~24 m)")
+    return f"fig15: maximum S = {s.max():.2e} at {best:.1f} m = {best / WAVELENGTH:.2f} lambda_R (paper ~5e-3 at ~24 m)"
