@@ -1,10 +1,33 @@
+"""What several test modules share: the example scenes, simulated series and posteriors of the frame
+and deterministic models, built-in scene tables, the quick study results and the command line."""
+
+import json
+import subprocess
+import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from forward.scene_file import load_scene
+from forward.scene_file import apply_overrides, load_scene, read_table, scene_from_table
+from forward.sensor import observe
+from vibinverse.io.builtin import builtin_scene
+from vibinverse.io.series import Series, validate
+from vibinverse.models import build_model
+from vibinverse.models.frame import modal_table
+from vibinverse.pipeline import run
+from vibinverse.posterior import Posterior
+from vibinverse.scene_keys import set_value
+from vibinverse.studies import STUDIES
 
 SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
+
+K = "surfaces.roof.motion."  # the roof's motion keys (frame and plate scenes)
+G = "surfaces.ground.motion."  # the ground's motion keys
+FAST = ("footprint.resolution=48", "sampling.duration=0.1")  # a quick render of an example scene
+LOW_RES = "footprint.resolution=32"  # 1024 subpixels: the dense oracle stays cheap
+SNR10 = "noise.sigma=0.6"  # drive-line amplitude / standard error of a sinusoid fit ~ 10 (README)
+WAVELENGTH = 75.0  # ground scene: 3000 m/s at 40 Hz
 
 
 @pytest.fixture
@@ -15,3 +38,123 @@ def scene():
         return load_scene(SCENES / f"{name}.toml", list(overrides))[0]
 
     return make
+
+
+# ------------------------------------------------------------------ the frame model (sec. 4.2)
+
+
+def frame_problem(*overrides, seed=3, gaps=0.0):
+    scene, table = load_scene(SCENES / "roof_frame.toml", list(overrides))
+    o = observe(scene, seed=seed)
+    y = o.intensity.copy()
+    if gaps:
+        y[np.random.default_rng(seed).random(y.size) < gaps] = np.nan
+    series = validate(o.time, y, "sim", table)
+    return Posterior(build_model(table, series))
+
+
+def frame(*overrides: str, modal: dict | None = None) -> dict:
+    table = apply_overrides(read_table(builtin_scene("roof_frame")), list(overrides))
+    if modal:
+        table = modal_table(table)
+        for key, value in modal.items():
+            set_value(table, K + key, value)
+    return table
+
+
+def series(table: dict, seed: int, gaps: float = 0.0) -> Series:
+    obs = observe(scene_from_table(table), seed)
+    y = obs.intensity.copy()
+    if gaps:
+        y[np.random.default_rng(100 + seed).random(y.size) < gaps] = np.nan
+    return Series(obs.time, y, f"seed {seed}", scene=table)
+
+
+# ------------------------------------------------------------------ the deterministic model (plate roof, ground waves)
+
+
+def simulate(name, *overrides, seed=0, truth_overrides=(), gaps=0.0, keep=None):
+    """(analyst's scene table, Series) of a simulated scene; `truth_overrides` change only the scene
+    the data come from, `keep` selects samples (non-uniform sampling)."""
+    scene, table = load_scene(SCENES / f"{name}.toml", [*overrides, *truth_overrides])
+    _, analyst = load_scene(SCENES / f"{name}.toml", list(overrides))
+    o = observe(scene, seed)
+    t, y = o.time, o.intensity.copy()
+    if gaps:
+        y[np.random.default_rng(seed).random(y.size) < gaps] = np.nan
+    if keep is not None:
+        t, y = t[keep], y[keep]
+    return analyst, validate(t, y, "sim", table)
+
+
+def fitted(table, series, method="map", **kw):
+    problem = Posterior(build_model(table, series))
+    summary = run(problem, method, progress=False, **kw).summary()
+    return problem, summary
+
+
+def z_scores(summary):
+    return {n: (p["median"] - p["truth"]) / p["sd"] for n, p in summary["parameters"].items()}
+
+
+# ------------------------------------------------------------------ design and studies
+
+
+def table(name: str, *overrides: str) -> dict:
+    return apply_overrides(read_table(builtin_scene(name)), list(overrides))
+
+
+@pytest.fixture(scope="session")
+def results(tmp_path_factory):
+    """Every paper study, quick: (output directory, each study's line, each study's JSON). Once per
+    session: the tests of every study module read it."""
+    out = tmp_path_factory.mktemp("studies")
+    lines = {name: fn(out, quick=True) for name, (fn, _) in STUDIES.items()}
+    return out, lines, {name: json.loads((out / f"{name}.json").read_text()) for name in STUDIES}
+
+
+# ------------------------------------------------------------------ the command line
+
+
+def run_cli(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "vibinverse", *args], capture_output=True, text=True, **kw)
+
+
+@pytest.fixture(scope="session")
+def short_data(tmp_path_factory):
+    """A 4 s frame series simulated by the command line (data.csv), once per session: each test
+    that fits it writes its own names beside it."""
+    d = tmp_path_factory.mktemp("fit")
+    r = run_cli(
+        "simulate",
+        str(SCENES / "roof_frame.toml"),
+        "--set",
+        "sampling.duration=4",
+        "--set",
+        "noise.sigma=0.05",
+        "--seed",
+        "2",
+        "-o",
+        str(d / "data.csv"),
+    )
+    assert r.returncode == 0, r.stderr
+    return d
+
+
+def fit_args(d, name, *extra, steps=400):
+    return (
+        "fit",
+        str(d / "data.csv"),
+        "--scene",
+        str(SCENES / "roof_frame.toml"),
+        "--method",
+        "mcmc",
+        "--max-steps",
+        str(steps),
+        "--no-progress",
+        "-o",
+        str(d / f"{name}.nc"),
+        "--summary",
+        str(d / f"{name}.json"),
+        *extra,
+    )

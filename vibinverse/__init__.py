@@ -13,7 +13,7 @@ try:
 except PackageNotFoundError:  # running from a source tree without installing
     __version__ = "0.0.0+source"
 
-from vibinverse.api import Observation, design, detect, fit, load_scene, load_series, posterior, simulate
+from vibinverse.api import Observation, design, detect, fit, load_scene, load_series, posterior, series, simulate
 from vibinverse.errors import DataError, InputError, NumericalError, SceneError, Unsupported, VibinverseError
 from vibinverse.models import SignalModel, register_model
 from vibinverse.priors import Prior

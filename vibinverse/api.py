@@ -18,13 +18,13 @@ from forward.reduce import DEFAULT_RTOL
 from forward.sensor import Observation, observe
 from vibinverse.errors import InputError, scene_errors
 from vibinverse.io.scenes import load_scene, scene_of
-from vibinverse.io.series import Series, load_series
+from vibinverse.io.series import Series, load_series, validate
 from vibinverse.models import build_model
 from vibinverse.posterior import Posterior
 from vibinverse.priors import Prior, parse_free, parse_prior
 from vibinverse.result import Detection, FitResult
 
-__all__ = ["Observation", "design", "detect", "fit", "load_scene", "load_series", "posterior", "simulate"]
+__all__ = ["Observation", "design", "detect", "fit", "load_scene", "load_series", "posterior", "series", "simulate"]
 
 SceneLike = str | Path | Mapping[str, Any]
 SeriesLike = str | Path | Series
@@ -43,6 +43,19 @@ def _table(scene: SceneLike, overrides: Sequence[str] = ()) -> dict[str, Any]:
 
 def _series(series: SeriesLike) -> Series:
     return series if isinstance(series, Series) else load_series(series)
+
+
+def series(time: Any, intensity: Any, *, scene: Mapping[str, Any] | None = None, source: str = "array") -> Series:
+    """A validated series from arrays (NaN intensities are gaps); `scene`, when the data were
+    simulated from one, gives the summary its true values."""
+    import numpy as np
+
+    return validate(
+        np.asarray(time, dtype=float),
+        np.asarray(intensity, dtype=float),
+        source,
+        None if scene is None else dict(scene),
+    )
 
 
 def _priors(free: Mapping[str, Prior | str] | None, table: dict[str, Any]) -> dict[str, Prior] | None:

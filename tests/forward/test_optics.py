@@ -77,9 +77,3 @@ def test_reflectance_is_a_probability_for_any_absorbing_index(theta, re, im):
     r_s, r_p = fresnel(theta, complex(re, im))
     assert 0.0 <= r_s <= 1.0 + 1e-12
     assert 0.0 <= r_p <= 1.0 + 1e-12
-
-
-def test_library_materials_reflect_as_quoted():
-    assert reflectance(0.0, LIBRARY["steel"].index) == pytest.approx(0.56, abs=0.01)
-    assert reflectance(0.0, LIBRARY["aluminium"].index) == pytest.approx(0.92, abs=0.01)
-    assert LIBRARY["glass"].index.real == pytest.approx(1.5185, abs=1e-4)

@@ -1,9 +1,7 @@
-"""Fitting deterministic scenes (plate roof, ground waves): the white-noise likelihood on the reduced
-forward model, its spectral starts, MAP/MCMC, detection, gaps, sampling and the hard cases."""
+"""The deterministic model (plate roof, ground waves): the white-noise likelihood on the reduced
+forward model, its default priors, fits with gaps, non-uniform sampling and the hard cases."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -11,8 +9,7 @@ import pytest
 from forward.reduce import compile_scene
 from forward.render import pixel_signal
 from forward.scene_file import load_scene, scene_from_table
-from forward.sensor import observe
-from tests.conftest import SCENES
+from tests.conftest import LOW_RES, SCENES, G, K, fitted, simulate, z_scores
 from vibinverse.design.metrics import evaluate
 from vibinverse.errors import VibinverseError
 from vibinverse.io.series import validate
@@ -23,44 +20,13 @@ from vibinverse.posterior import Posterior
 from vibinverse.priors import Prior
 from vibinverse.scene_keys import set_value
 
-R = "surfaces.roof.motion."
-G = "surfaces.ground.motion."
-LOW_RES = "footprint.resolution=32"  # 1024 subpixels: the dense oracle stays cheap
-
-
-def simulate(name, *overrides, seed=0, truth_overrides=(), gaps=0.0, keep=None):
-    """(analyst's scene table, Series) of a simulated scene; `truth_overrides` change only the scene
-    the data come from, `keep` selects samples (non-uniform sampling)."""
-    scene, table = load_scene(SCENES / f"{name}.toml", [*overrides, *truth_overrides])
-    _, analyst = load_scene(SCENES / f"{name}.toml", list(overrides))
-    o = observe(scene, seed)
-    t, y = o.time, o.intensity.copy()
-    if gaps:
-        y[np.random.default_rng(seed).random(y.size) < gaps] = np.nan
-    if keep is not None:
-        t, y = t[keep], y[keep]
-    return analyst, validate(t, y, "sim", table)
-
-
-def fitted(table, series, method="map", **kw):
-    problem = Posterior(build_model(table, series))
-    summary = run(problem, method, progress=False, **kw).summary()
-    return problem, summary
-
-
-def z_scores(summary):
-    return {n: (p["median"] - p["truth"]) / p["sd"] for n, p in summary["parameters"].items()}
-
-
-# ------------------------------------------------------------------ the mean against the forward model
-
 
 def test_mean_equals_the_dense_forward_model_away_from_the_scene_values():
     """The likelihood's mean re-formed for new motion values (frequency, amplitude, phase, gain)
     equals every-subpixel rendering of the scene with those values, to the Taylor bound."""
     table, series = simulate("roof_elastic", LOW_RES)
     like = DeterministicModel(table, series)
-    values = {R + "frequency": 41.3, R + "center_deflection": 2e-3, R + "phase": 0.8, "sun.irradiance": 1.7}
+    values = {K + "frequency": 41.3, K + "center_deflection": 2e-3, K + "phase": 0.8, "sun.irradiance": 1.7}
     other = json.loads(json.dumps(table))
     for n, v in values.items():
         set_value(other, n, v)
@@ -75,7 +41,7 @@ def test_geometry_values_rebuild_the_scene():
     """Sun and view angles and the lobe width are fittable: the mean is the compiled scene there."""
     table, series = simulate("roof_elastic", LOW_RES)
     like = DeterministicModel(table, series)
-    values = {"sun.inclination": 1.02, "surfaces.roof.lobe_width": 0.012, R + "center_deflection": 1.5e-3}
+    values = {"sun.inclination": 1.02, "surfaces.roof.lobe_width": 0.012, K + "center_deflection": 1.5e-3}
     other = json.loads(json.dumps(table))
     for n, v in values.items():
         set_value(other, n, v)
@@ -94,15 +60,12 @@ def test_log_likelihood_is_the_gaussian_density_with_shot_noise():
     assert like.log_likelihood({}) == pytest.approx(expected, rel=1e-12)
 
 
-# ------------------------------------------------------------------ fits
-
-
 def test_plate_map_recovers_the_truth_and_its_sd_is_the_cramer_rao_bound():
     table, series = simulate("roof_elastic", seed=4)
     _problem, summary = fitted(table, series)
     assert all(abs(z) < 3.0 for z in z_scores(summary).values()), z_scores(summary)
-    crb = evaluate(table, [R + "frequency", R + "center_deflection"], {})
-    for n in (R + "frequency", R + "center_deflection"):
+    crb = evaluate(table, [K + "frequency", K + "center_deflection"], {})
+    for n in (K + "frequency", K + "center_deflection"):
         # the Laplace sd at the fitted sigma against the bound at the true sigma: sigma's own
         # estimate scatters by 1/sqrt(2N) = 3 %; the nuisances differ (gain and phase vs DC and time)
         assert summary["parameters"][n]["sd"] / crb[f"crlb {n}"] == pytest.approx(1.0, abs=0.12)
@@ -110,15 +73,7 @@ def test_plate_map_recovers_the_truth_and_its_sd_is_the_cramer_rao_bound():
     assert summary["data"]["model"]["kind"] == "taylor2"
 
 
-def test_ground_wave_mcmc_intervals_contain_the_truth(tmp_path):
-    table, series = simulate("ground_rayleigh", LOW_RES, "noise.sigma=3e-6", seed=2)
-    _problem, summary = fitted(table, series, "mcmc", backend=tmp_path / "c.h5", max_steps=3000)
-    for n in (G + "frequency[0]", G + "amplitude[0]", G + "phase[0]", "noise.sigma"):
-        p = summary["parameters"][n]
-        assert p["q05"] <= p["truth"] <= p["q95"], (n, p)
-    assert summary["diagnostics"]["converged"]
-
-
+@pytest.mark.slow
 def test_data_in_other_units_are_absorbed_by_the_gain():
     """A sensor in digital numbers: the same series x 1000. The default gain prior follows the
     mean level, sun.irradiance comes out 1000x, and the amplitude is unchanged."""
@@ -129,15 +84,8 @@ def test_data_in_other_units_are_absorbed_by_the_gain():
     table_dn["noise"]["sigma"] = 1000.0 * table["noise"]["sigma"]
     _, dn = fitted(table_dn, scaled)
     assert dn["parameters"]["sun.irradiance"]["median"] == pytest.approx(1000.0, rel=1e-3)
-    a, b = (s["parameters"][R + "center_deflection"] for s in (ref, dn))
+    a, b = (s["parameters"][K + "center_deflection"] for s in (ref, dn))
     assert b["median"] == pytest.approx(a["median"], abs=0.05 * a["sd"]) and b["sd"] == pytest.approx(a["sd"], rel=0.02)
-
-
-def test_a_vibration_absent_from_the_data_is_not_detected():
-    table, series = simulate("roof_elastic", truth_overrides=("surfaces.roof.motion.center_deflection=0",), seed=5)
-    _, summary = fitted(table, series)
-    d = summary["diagnostics"]
-    assert not d["vibration_detected"] and d["vibration_delta_loglike"] < d["vibration_threshold"]
 
 
 def test_ten_percent_gaps_and_non_uniform_sampling():
@@ -177,15 +125,15 @@ def test_tiny_amplitudes_on_quadrant_and_centred_footprints(footprint, amplitude
     overrides = (*footprint, f"noise.sigma={sigma}", f"surfaces.roof.motion.center_deflection={amplitude}", LOW_RES)
     table, series = simulate("roof_elastic", *overrides, seed=8)
     free = {
-        R + "frequency": Prior("uniform", (30.0, 50.0)),
-        R + "center_deflection": Prior("loguniform", (amplitude / 100, amplitude * 100)),
-        R + "phase": Prior("uniform", (-np.pi / 2, np.pi / 2)),
+        K + "frequency": Prior("uniform", (30.0, 50.0)),
+        K + "center_deflection": Prior("loguniform", (amplitude / 100, amplitude * 100)),
+        K + "phase": Prior("uniform", (-np.pi / 2, np.pi / 2)),
         "noise.sigma": Prior("loguniform", (sigma / 10, sigma * 10)),
     }
     summary = run(Posterior(build_model(table, series), free), "map", progress=False).summary()
     assert np.all(np.isfinite([v["median"] for v in summary["parameters"].values()]))
     assert all(abs(z) < 3.0 for z in z_scores(summary).values()), z_scores(summary)
-    assert summary["parameters"][R + "center_deflection"]["sd"] < 0.05 * amplitude
+    assert summary["parameters"][K + "center_deflection"]["sd"] < 0.05 * amplitude
 
 
 def test_large_amplitude_switches_to_the_compiled_model():
@@ -201,23 +149,20 @@ def test_large_amplitude_switches_to_the_compiled_model():
     # when left): it equals the scene compiled afresh at each value, to the compiler's rtol
     like = problem.model
     for values in (
-        {R + "center_deflection": 0.02},
-        {R + "center_deflection": 0.035, R + "phase": 0.4, R + "frequency": 41.0},
-        {R + "center_deflection": 0.001},
+        {K + "center_deflection": 0.02},
+        {K + "center_deflection": 0.035, K + "phase": 0.4, K + "frequency": 41.0},
+        {K + "center_deflection": 0.001},
     ):
         level, ac = like.parts(values)
         dc, ref = compile_scene(scene_from_table(like.table_with(values)), series.time).parts()
         assert np.abs((level + ac) - (dc + ref)).max() <= 1e-5 * np.ptp(ref)
 
 
-# ------------------------------------------------------------------ bad input
-
-
 def test_zero_noise_that_is_not_free_is_a_clear_error():
     table, series = simulate("roof_elastic", LOW_RES)
     table["noise"]["sigma"] = 0.0
     with pytest.raises(VibinverseError, match=r"noise\.sigma"):
-        Posterior(build_model(table, series), {R + "frequency": Prior("uniform", (30.0, 50.0))})
+        Posterior(build_model(table, series), {K + "frequency": Prior("uniform", (30.0, 50.0))})
 
 
 def test_scenes_the_fit_cannot_take_are_clear_errors():
@@ -241,37 +186,7 @@ def test_scenes_the_fit_cannot_take_are_clear_errors():
         Posterior(build_model(frame, validate(t, np.ones(t.size), "x")), {"noise.sigma": Prior("loguniform", (0.1, 1))})
 
 
-def test_cli_fits_a_plate_and_refuses_sindy(tmp_path):
-    scene = SCENES / "roof_elastic.toml"
-    data = tmp_path / "plate.csv"
-    run = lambda *a: subprocess.run(
-        [sys.executable, "-m", "vibinverse.cli", *map(str, a)], capture_output=True, text=True
-    )
-    assert run("simulate", scene, "--seed", "3", "--set", LOW_RES, "-o", data).returncode == 0
-    out = run(
-        "fit",
-        data,
-        "--scene",
-        scene,
-        "--set",
-        LOW_RES,
-        "--method",
-        "map",
-        "-o",
-        tmp_path / "r.nc",
-        "--summary",
-        tmp_path / "r.json",
-    )
-    assert out.returncode == 0, out.stderr
-    summary = json.loads((tmp_path / "r.json").read_text())
-    assert summary["parameters"][R + "frequency"]["truth"] == 40.0
-    bad = run(
-        "fit", data, "--scene", scene, "--method", "sindy", "-o", tmp_path / "s.nc", "--summary", tmp_path / "s.json"
-    )
-    assert bad.returncode == 2 and "sindy" in bad.stderr and "Traceback" not in bad.stderr
-    assert not (tmp_path / "s.nc").exists()
-
-
+@pytest.mark.slow
 def test_two_ground_lines_are_both_recovered():
     table, series = simulate(
         "ground_rayleigh",
@@ -307,6 +222,7 @@ def test_default_priors_partition_the_band_between_lines_and_centre_the_phase():
         assert hi - lo == pytest.approx(2 * np.pi) and abs(np.angle(np.exp(1j * (phase - 0.5 * (lo + hi))))) < 0.5
 
 
+@pytest.mark.slow
 def test_a_line_seen_only_at_second_order_gets_a_pi_phase_window_and_is_fitted(tmp_path):
     """Centred footprint: x ~ a^2 cos^2(w t + phase), so phase and phase + pi are one fit. The
     default prior is a pi window; the posterior is then one mode and holds the truth."""
@@ -320,78 +236,12 @@ def test_a_line_seen_only_at_second_order_gets_a_pi_phase_window_and_is_fitted(t
         seed=11,
     )
     free = build_model(table, series).default_priors()
-    lo, hi = free[R + "phase"].bounds
+    lo, hi = free[K + "phase"].bounds
     assert hi - lo == pytest.approx(np.pi)
     problem = Posterior(build_model(table, series), free)
     summary = run(problem, "mcmc", backend=tmp_path / "c.h5", max_steps=3000, progress=False).summary()
     assert not summary["diagnostics"]["multimodal"]
-    assert summary["parameters"][R + "phase"]["truth"] == pytest.approx(lo + (2.0 - lo) % np.pi)  # modulo pi
-    for n in (R + "frequency", R + "center_deflection", R + "phase"):
+    assert summary["parameters"][K + "phase"]["truth"] == pytest.approx(lo + (2.0 - lo) % np.pi)  # modulo pi
+    for n in (K + "frequency", K + "center_deflection", K + "phase"):
         p = summary["parameters"][n]
         assert p["q05"] <= p["truth"] <= p["q95"], (n, p)
-
-
-# ------------------------------------------------------------------ casadi MAP
-
-
-def test_casadi_objective_equals_the_numpy_posterior_with_gaps_and_shot_noise():
-    from vibinverse.models.deterministic_casadi import CasadiResponseObjective
-
-    table, series = simulate("roof_elastic", LOW_RES, "noise.photons_per_unit=1e4", seed=3, gaps=0.05)
-    problem = Posterior(build_model(table, series))
-    objective = CasadiResponseObjective(problem)
-    z0 = problem.space.to_z(problem.truth())
-    for dz in np.random.default_rng(0).normal(0.0, 0.01, (3, z0.size)):
-        assert objective(z0 + dz) == pytest.approx(-problem.log_posterior(z0 + dz), rel=1e-9)
-
-
-def test_casadi_map_equals_the_scipy_map_and_falls_back_where_shapes_move():
-    from vibinverse.errors import Unsupported
-    from vibinverse.models.deterministic_casadi import CasadiResponseObjective
-
-    table, series = simulate("roof_elastic", LOW_RES, seed=3)
-    problem = Posterior(build_model(table, series))
-    fast = run(problem, "casadi", progress=False).summary()
-    slow = run(problem, "map", progress=False).summary()
-    assert fast["method"] == "casadi" and slow["method"] == "map"
-    for n, p in slow["parameters"].items():
-        assert fast["parameters"][n]["median"] == pytest.approx(p["median"], abs=0.01 * p["sd"])
-        assert fast["parameters"][n]["sd"] == pytest.approx(p["sd"], rel=0.01)
-    # a Rayleigh frequency changes the wave's shape; a plate driven through its boundary has q ~ w^2
-    ground, gs = simulate("ground_rayleigh", LOW_RES, "noise.sigma=3e-6")
-    with pytest.raises(Unsupported, match="frequency"):
-        CasadiResponseObjective(Posterior(build_model(ground, gs)))
-    fixed_f = {
-        G + "amplitude[0]": Prior("uniform", (0.0, 0.01)),
-        G + "phase[0]": Prior("uniform", (-np.pi, np.pi)),
-        "noise.sigma": Prior("loguniform", (1e-7, 1e-4)),
-    }
-    assert run(Posterior(build_model(ground, gs), fixed_f), "casadi", progress=False).summary()["method"] == "casadi"
-    boundary = json.loads(json.dumps(table))
-    motion = boundary["surfaces"]["roof"]["motion"]
-    del motion["center_deflection"]
-    motion.update({"boundary_amplitude": 1e-4, "density": 7850.0, "shear_modulus": 8e10})
-    with pytest.raises(Unsupported, match="frequency"):
-        CasadiResponseObjective(
-            Posterior(
-                build_model(boundary, series),
-                {R + "frequency": Prior("uniform", (30.0, 50.0)), "noise.sigma": Prior("loguniform", (1e-3, 1.0))},
-            )
-        )
-
-
-def test_fisher_bound_equals_the_design_bound_and_the_sigma_bound():
-    """Two implementations of the same Cramer-Rao bound: `fisher.response_fisher` (nuisances gain
-    and phase) and `design.metrics` (nuisances DC and time shift) give the same frequency and
-    amplitude sds: a single line's phase is its time shift, and the mean level pins the gain (to
-    3e-5), so that it acts as a DC offset does. sigma's bound is sigma / sqrt(2N) exactly."""
-    from vibinverse.fisher import crlb_from_fisher, response_fisher
-
-    table, series = simulate("roof_elastic", seed=4)
-    problem = Posterior(build_model(table, series))
-    names = problem.space.names
-    bound = crlb_from_fisher(response_fisher(problem.model, problem.truth(), names), names)
-    design = evaluate(table, [R + "frequency", R + "center_deflection"], {})
-    for n in (R + "frequency", R + "center_deflection"):
-        assert bound[n] == pytest.approx(design[f"crlb {n}"], rel=1e-3)
-    assert bound["noise.sigma"] == pytest.approx(0.05 / np.sqrt(2 * series.time.size), rel=1e-9)

@@ -1,5 +1,7 @@
 """Building frame (11)-(16): linear modes, exact discretization, nonlinear quaternion dynamics."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -82,6 +84,7 @@ def test_nonlinear_and_linear_tilt_agree_at_1mm_drive_over_20s():
     assert np.abs(hx + q[:, 4]).max() < 0.01 * np.abs(q[:, 4]).max()
 
 
+@pytest.mark.slow
 def test_nonlinear_conserves_energy_through_the_flat_equilibrium():
     undamped = FrameParameters(1.0, 50.0, 50.0, (2 * np.pi) ** 2, 0.0, 4 * (2 * np.pi) ** 2, 0.0)
     nl = NonlinearFrame(undamped)
@@ -184,3 +187,20 @@ def test_nonlinear_model_runs_in_a_scene(scene):
 def test_invalid_frame_scenes(scene, override, message):
     with pytest.raises(SceneError, match=message):
         scene("roof_frame", override)
+
+
+def test_mode_zoh_closed_form_equals_the_matrix_exponential():
+    from scipy.linalg import expm
+
+    from forward.motion.frame import mode_zoh
+
+    for zeta in (0.0, 1e-6, 0.0138, 0.5, 0.9, 0.95, 1.0, 2.0):  # above 0.9: the matrix exponential path
+        for f, dt in ((3.46, 1 / 200), (99.0, 1 / 200), (0.1, 1e-3)):
+            w, mass = 2 * math.pi * f, 2.0
+            k, c = mass * w * w, 2 * zeta * w * mass
+            aug = np.zeros((3, 3))
+            aug[0, 1], aug[1, 0], aug[1, 1], aug[1, 2] = dt, -k / mass * dt, -c / mass * dt, dt / mass
+            ref = expm(aug)
+            phi, gam = mode_zoh(k, c, mass, dt)
+            assert np.abs(phi - ref[:2, :2]).max() <= 1e-12 * np.abs(ref[:2, :2]).max()
+            assert np.abs(gam - ref[:2, 2]).max() <= 1e-12 * np.abs(ref[:2, 2]).max()

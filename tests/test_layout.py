@@ -1,0 +1,132 @@
+"""The code's shape, checked: no import cycle, `forward` never imports `vibinverse`, no model-kind
+string switch outside the models, no reach-in to another module's private names, and every module
+imports on its own in a fresh interpreter."""
+
+import ast
+import re
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("forward", "vibinverse")
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join(parts)] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _type_checking(node: ast.If) -> bool:
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
+def _top_level_imports(name: str, path: Path) -> set[str]:
+    """Modules of this project that `name` imports when it is imported (module level, outside
+    `if TYPE_CHECKING:`; imports inside functions run later and cannot form an import-time cycle)."""
+    tree = ast.parse(path.read_text())
+    found: set[str] = set()
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+
+    def visit(body):
+        for node in body:
+            if isinstance(node, ast.If) and not _type_checking(node):
+                visit(node.body)
+                visit(node.orelse)
+            elif isinstance(node, ast.Try):
+                visit(node.body)
+            elif isinstance(node, ast.Import):
+                found.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + [base]).strip(".")
+                for a in node.names:
+                    found.add(f"{base}.{a.name}" if f"{base}.{a.name}" in MODULES else base)
+
+    visit(tree.body)
+    return {m for m in found if m in MODULES and m != name}
+
+
+GRAPH = {name: _top_level_imports(name, path) for name, path in MODULES.items()}
+
+
+def test_no_import_cycle():
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def dfs(node):
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(GRAPH[node]):
+            if state.get(nxt) == 1:
+                raise AssertionError("import cycle: " + " -> ".join([*stack[stack.index(nxt) :], nxt]))
+            if nxt not in state:
+                dfs(nxt)
+        stack.pop()
+        state[node] = 2
+
+    for name in sorted(GRAPH):
+        if name not in state:
+            dfs(name)
+
+
+def test_forward_never_imports_vibinverse():
+    for name, path in MODULES.items():
+        if name.startswith("forward"):
+            text = path.read_text()
+            assert not re.search(r"^\s*(from|import)\s+vibinverse\b", text, re.M), name
+
+
+def test_no_model_kind_switch_outside_the_models():
+    """Model kinds are chosen by the registry (`vibinverse.models.model_class_for`), not by string
+    comparisons spread over the pipeline."""
+    kinds = "|".join(["frame", "response", "deterministic", "plate", "rayleigh"])
+    pattern = re.compile(rf"""(==|!=)\s*["']({kinds})["']|["']({kinds})["']\s*(==|!=)|\bis_frame\b""")
+    for name, path in MODULES.items():
+        if name.startswith("vibinverse") and not name.startswith("vibinverse.models"):
+            for k, line in enumerate(path.read_text().splitlines(), 1):
+                assert not pattern.search(line), f"{path}:{k}: {line.strip()}"
+
+
+def test_no_reach_in_to_another_modules_private_names():
+    for name, path in MODULES.items():
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                private = [a.name for a in node.names if a.name.startswith("_") and not a.name.startswith("__")]
+                assert not private, f"{name} imports private {private} from {node.module}"
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+                obj, attr = node.value.id, node.attr
+                if attr.startswith("_") and not attr.startswith("__") and obj not in ("self", "cls"):
+                    raise AssertionError(f"{path}:{node.lineno}: {obj}.{attr} reaches into a private name")
+
+
+@pytest.mark.slow
+def test_every_module_imports_alone_in_a_fresh_interpreter():
+    """Each vibinverse module in its own interpreter (two at a time), so that a module that imports
+    only because another one was imported before it fails here. (`__main__` modules run the CLI.)"""
+    mods = [m for m in MODULES if m.startswith("vibinverse") and not m.endswith("__main__")]
+
+    def load(m: str) -> str:
+        r = subprocess.run([sys.executable, "-c", f"import {m}"], capture_output=True, text=True, cwd=ROOT)
+        return f"{m}: {r.stderr.strip().splitlines()[-1]}" if r.returncode else ""
+
+    with ThreadPoolExecutor(2) as pool:
+        bad = [b for b in pool.map(load, mods) if b]
+    assert not bad, "\n".join(bad)

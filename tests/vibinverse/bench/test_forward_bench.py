@@ -1,0 +1,25 @@
+"""The forward, likelihood and design bench rows have the documented fields."""
+
+from tests.conftest import SCENES
+
+
+def test_forward_bench_rows_have_the_documented_fields():
+    from vibinverse.bench.forward_bench import forward_rows, scaling_rows, speed_error_rows
+
+    rows = forward_rows(SCENES, resolution=20, n_samples=400, log=lambda *a: None)
+    assert [r["scene"] for r in rows] == ["roof_elastic", "glass_brewster", "roof_frame", "ground_rayleigh"]
+    for r in rows:
+        assert {"scene", "reference_s", "fast_s", "speedup", "rel_error"} <= set(r)
+        assert r["rel_error"] <= 1e-3
+    scaling = scaling_rows(SCENES, resolutions=(16,), samples=(100, 1000), log=lambda *a: None)
+    assert [(r["subpixels"], r["samples"]) for r in scaling] == [(256, 100), (256, 1000)]
+    se = speed_error_rows(SCENES, 24, n=200, coarse=(8,), log=lambda *a: None)
+    assert {r["method"] for r in se} == {"fast", "dense"}
+    from vibinverse.bench.likelihood_bench import likelihood_row
+
+    lk = likelihood_row(SCENES / "roof_frame.toml", log=lambda *a: None)
+    assert lk["samples"] == 4000 and lk["ours_us"] > 0 and lk["ratio"] > 0
+    from vibinverse.bench.design_bench import design_row
+
+    d = design_row(SCENES / "roof_elastic.toml", 4, workers=(1,), log=lambda *a: None)
+    assert d["configurations"] == 16 and d["seconds"]["1"] > 0 and d["ms_per_configuration"]["1"] > 0

@@ -1,0 +1,83 @@
+"""Sampling with emcee: intervals that hold the truth, multimodal walkers flagged, and an
+interrupted run that resumes to the same samples."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from tests.conftest import LOW_RES, SNR10, G, K, fit_args, fitted, frame_problem, run_cli, simulate
+from vibinverse.fisher import crlb_sd
+from vibinverse.pipeline import run
+
+
+@pytest.mark.slow
+def test_mcmc_intervals_contain_the_truth(tmp_path):
+    prob = frame_problem(SNR10)
+    summary = run(prob, "mcmc", max_steps=1500, progress=False, backend=tmp_path / "c.h5", seed=1).summary()
+    truth = prob.truth()
+    for n in ("tilt_frequency", "tilt_damping_ratio", "drive_frequency", "drive_amplitude"):
+        p = summary["parameters"][K + n]
+        assert p["q05"] <= truth[K + n] <= p["q95"], (n, p)
+    crlb = crlb_sd(prob.model, truth, [K + "drive_frequency", K + "drive_amplitude", K + "drive_phase"])
+    assert summary["parameters"][K + "drive_frequency"]["sd"] <= 1.5 * crlb[K + "drive_frequency"]
+
+
+@pytest.mark.slow
+def test_ground_wave_mcmc_intervals_contain_the_truth(tmp_path):
+    table, series = simulate("ground_rayleigh", LOW_RES, "noise.sigma=3e-6", seed=2)
+    _problem, summary = fitted(table, series, "mcmc", backend=tmp_path / "c.h5", max_steps=3000)
+    for n in (G + "frequency[0]", G + "amplitude[0]", G + "phase[0]", "noise.sigma"):
+        p = summary["parameters"][n]
+        assert p["q05"] <= p["truth"] <= p["q95"], (n, p)
+    assert summary["diagnostics"]["converged"]
+
+
+def test_multimodal_walkers_are_flagged():
+    from vibinverse.estimators.mcmc import multimodal
+    from vibinverse.report import warnings_for
+
+    rng = np.random.default_rng(0)
+    one = rng.normal(0.0, 1.0, (16, 500, 2))
+    two = one.copy()
+    two[:6, :, 1] += 40.0  # six walkers stuck in a second mode of parameter 1
+    assert multimodal(one, ["a", "b"]) == []
+    assert multimodal(two, ["a", "b"]) == ["b"]
+    summary = {"diagnostics": {"multimodal": ["b"], "converged": True}, "parameters": {}}
+    assert any("b is multimodal" in w for w in warnings_for(summary, None, []))
+
+
+@pytest.mark.slow
+def test_interrupted_run_resumes_to_the_same_samples(short_data):
+    import h5py
+
+    d = short_data
+    steps = 800
+    full = run_cli(*fit_args(d, "full800", steps=steps))
+    assert full.returncode == 0, full.stderr
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "vibinverse", *fit_args(d, "cut", steps=steps)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    for line in proc.stdout:  # the fit says when sampling starts; interrupt a little later
+        if line.startswith("sampling with emcee"):
+            break
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130 and "resume with --resume" in err and "Traceback" not in err, err
+    assert not (d / "cut.nc").exists()
+    with h5py.File(d / "cut.chain.h5", "r") as f:
+        assert 0 < f["mcmc"].attrs["iteration"] < steps  # really interrupted mid-run
+    resumed = run_cli(*fit_args(d, "cut", "--resume", steps=steps))
+    assert resumed.returncode == 0, resumed.stderr
+    with h5py.File(d / "full800.chain.h5", "r") as a, h5py.File(d / "cut.chain.h5", "r") as b:
+        assert a["mcmc"].attrs["iteration"] == b["mcmc"].attrs["iteration"] == steps
+        np.testing.assert_array_equal(a["mcmc/chain"][...], b["mcmc/chain"][...])
+    assert json.loads((d / "cut.json").read_text())["diagnostics"]["n_steps"] == steps

@@ -1,0 +1,69 @@
+"""The public Python API alone: simulate, fit, detect, and the result's InferenceData round trip."""
+
+import json
+
+import arviz as az
+import numpy as np
+import pytest
+
+import vibinverse as vi
+from vibinverse.io.builtin import builtin_scene
+
+
+def _inside_90(result: vi.FitResult) -> dict[str, bool]:
+    return {n: v["q05"] <= v["truth"] <= v["q95"] for n, v in result.summary()["parameters"].items()}
+
+
+@pytest.fixture(scope="module")
+def frame_fit():
+    """The sec. 4.2 frame (drive-line SNR ~10), fitted by the casadi MAP with Laplace intervals."""
+    scene = vi.load_scene(builtin_scene("roof_frame"), ["noise.sigma=0.6"])
+    obs = vi.simulate(scene, seed=3)
+    return vi.fit(vi.series(obs.time, obs.intensity, scene=scene), scene, method="casadi")
+
+
+def test_the_frame_scene_fits_with_truth_inside_every_90_percent_interval(frame_fit):
+    # 7 free parameters; seed 3 is a draw where all hold (each holds with ~0.9 over seeds, as the
+    # estimator bench's coverage column shows)
+    assert frame_fit.method == "casadi"
+    assert all(_inside_90(frame_fit).values()), _inside_90(frame_fit)
+    assert {d.what: d.detected for d in vi.detect(frame_fit)} == {"drive": True, "resonance": True}
+
+
+def test_a_plate_scene_fits_with_truth_inside_every_90_percent_interval():
+    scene = vi.load_scene(builtin_scene("roof_elastic"))
+    obs = vi.simulate(scene, seed=3)
+    result = vi.fit(vi.series(obs.time, obs.intensity, scene=scene), scene, method="casadi")
+    assert all(_inside_90(result).values()), _inside_90(result)
+    assert [d.detected for d in result.detections] == [True]
+    assert result.summary()["data"]["model"]["kind"] == "taylor2"
+
+
+def test_inference_data_round_trips_through_netcdf(frame_fit, tmp_path):
+    idata = frame_fit.to_inference_data()
+    path = frame_fit.to_netcdf(tmp_path / "r.nc")
+    back = az.from_netcdf(str(path), engine="h5netcdf")
+    assert set(back.groups()) == set(idata.groups())
+    for var in idata.posterior.data_vars:
+        np.testing.assert_array_equal(back.posterior[var].values, idata.posterior[var].values)
+    np.testing.assert_array_equal(back.observed_data["intensity"].values, frame_fit.series.intensity)
+    assert json.loads(back.observed_data.attrs["vibinverse_summary"]) == json.loads(json.dumps(frame_fit.summary()))
+    summary, _ = vi.read_result(path)
+    assert summary["parameters"].keys() == frame_fit.summary()["parameters"].keys()
+
+
+def test_free_priors_by_string_and_errors_are_one_hierarchy():
+    scene = vi.load_scene(builtin_scene("roof_elastic"))
+    obs = vi.simulate(scene, seed=1)
+    s = vi.series(obs.time, obs.intensity, scene=scene)
+    post = vi.posterior(
+        s, scene, free={"surfaces.roof.motion.frequency": "uniform(30, 50)", "noise.sigma": "loguniform(1e-3, 1)"}
+    )
+    assert post.space.names == ["surfaces.roof.motion.frequency", "noise.sigma"]
+    with pytest.raises(vi.SceneError, match=r"sun\.inclination"):
+        vi.simulate(scene, overrides=["sun.inclination=2"])
+    with pytest.raises(vi.DataError, match="at least 16"):
+        vi.series(np.arange(5.0), np.ones(5))
+    with pytest.raises(vi.InputError, match="--method"):
+        vi.fit(s, scene, method="nope")
+    assert issubclass(vi.SceneError, vi.InputError) and issubclass(vi.InputError, vi.VibinverseError)
