@@ -40,5 +40,6 @@ __all__ = [
     "posterior",
     "read_result",
     "register_model",
+    "series",
     "simulate",
 ]

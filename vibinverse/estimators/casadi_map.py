@@ -11,9 +11,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from vibinverse.errors import NumericalError
+from vibinverse.errors import InputError, NumericalError
 from vibinverse.estimators.base import Estimator, register_estimator
-from vibinverse.estimators.scipy_map import map_result
+from vibinverse.estimators.scipy_map import MapPoint, map_result
 from vibinverse.posterior import Posterior
 from vibinverse.result import FitResult
 
@@ -62,11 +62,11 @@ def _compiled(problem: Posterior):
     return obj, solver, hess
 
 
-def casadi_map(problem: Posterior, starts: list[dict[str, float]]) -> dict:
+def casadi_map(problem: Posterior, starts: list[dict[str, float]]) -> MapPoint:
     """MAP by IPOPT (exact gradients and Hessian) from the promising starts; Laplace covariance from the
-    exact Hessian at the best optimum. Same return shape as `scipy_map.map_fit`."""
+    exact Hessian at the best optimum."""
     if not starts:
-        raise ValueError("casadi_map: no starting point")
+        raise InputError("casadi MAP: no starting point")
     obj, solver, hess = _compiled(problem)
     data = obj.data()
     # the candidates differ in which line is the drive; IPOPT runs from those whose starting
@@ -87,16 +87,7 @@ def casadi_map(problem: Posterior, starts: list[dict[str, float]]) -> dict:
         raise NumericalError("casadi MAP: IPOPT found no finite optimum from any start")
     zs, f = best
     h = np.array(hess(zs, data))
-    cov = np.linalg.inv(0.5 * (h + h.T))
-    jac = np.array([np.exp(p.log_jacobian(float(v))) for p, v in zip(problem.space.priors, zs)])
-    sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * jac
-    return {
-        "z": zs,
-        "values": problem.values(zs),
-        "cov_z": cov,
-        "sd": dict(zip(problem.space.names, sd)),
-        "log_post": -f,
-    }
+    return MapPoint(zs, np.linalg.inv(0.5 * (h + h.T)), -f)
 
 
 @register_estimator

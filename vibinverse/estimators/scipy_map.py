@@ -5,6 +5,7 @@ any model."""
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -33,17 +34,25 @@ def hessian(f, z: np.ndarray, steps: np.ndarray) -> np.ndarray:
     return h
 
 
-def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed: int = 0) -> dict:
-    """MAP in the unconstrained space from `start` and jittered restarts; Laplace covariance.
+@dataclass(frozen=True)
+class MapPoint:
+    """A MAP in the samplers' unconstrained space: the point z, the Laplace covariance cov_z (the
+    inverse Hessian of -log posterior), the log posterior there, and whether the Hessian was
+    positive definite (when not, cov_z holds only the conditional variances of its diagonal)."""
 
-    Returns {"z", "values", "cov_z", "sd", "log_post", "n_evals", "hessian_ok"}; sd is in value units
-    (delta method); hessian_ok is False when the Hessian was not positive definite and the sds are
-    the conditional ones of its diagonal.
-    """
+    z: np.ndarray
+    cov_z: np.ndarray
+    log_post: float
+    hessian_ok: bool = True
+
+
+def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed: int = 0) -> MapPoint:
+    """MAP in the unconstrained space from `start` and jittered restarts; Laplace covariance from a
+    central-difference Hessian."""
     rng = np.random.default_rng(seed)
     neg = lambda z: -problem.log_posterior(z) if np.all(np.isfinite(z)) else np.inf
     z0 = problem.space.to_z(start)
-    best, evals = None, 0
+    best = None
     for k in range(restarts):
         zi = z0 if k == 0 else z0 + rng.normal(0.0, 0.05, z0.size)
         res = minimize(
@@ -53,7 +62,6 @@ def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed
             options={"maxiter": 200 * z0.size, "xatol": 1e-9, "fatol": 1e-9, "adaptive": True},
         )
         res = minimize(neg, res.x, method="BFGS", options={"gtol": 1e-6})
-        evals += res.nfev
         if best is None or res.fun < best.fun:
             best = res
     z = best.x
@@ -68,18 +76,7 @@ def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed
     except np.linalg.LinAlgError:  # conditional sds only: they understate correlated parameters
         ok = False
         cov = np.diag(1.0 / np.maximum(np.abs(np.diag(h)), 1e-12))
-    # delta method: d value / d z per parameter
-    jac = np.array([np.exp(p.log_jacobian(float(v))) for p, v in zip(problem.space.priors, z)])
-    sd = np.sqrt(np.diag(cov)) * jac
-    return {
-        "z": z,
-        "values": problem.values(z),
-        "cov_z": cov,
-        "sd": dict(zip(problem.space.names, sd)),
-        "log_post": -best.fun,
-        "n_evals": evals,
-        "hessian_ok": ok,
-    }
+    return MapPoint(z, cov, float(-best.fun), ok)
 
 
 def laplace_draws(problem: Posterior, z: np.ndarray, cov_z: np.ndarray, seed: int, n: int = 2000) -> np.ndarray:
@@ -89,21 +86,24 @@ def laplace_draws(problem: Posterior, z: np.ndarray, cov_z: np.ndarray, seed: in
     return np.array([list(problem.values(zi).values()) for zi in zs])
 
 
-def map_result(problem: Posterior, method: str, fit: dict, seed: int) -> FitResult:
-    """A FitResult of a MAP fit (`map_fit` or the casadi MAP's return) with its Laplace draws."""
+def map_result(problem: Posterior, method: str, fit: MapPoint, seed: int) -> FitResult:
+    """The FitResult of a MAP: values, sds by the delta method (d value / d z per parameter), and
+    draws of the Laplace approximation."""
+    jac = np.array([np.exp(p.log_jacobian(float(v))) for p, v in zip(problem.space.priors, fit.z)])
+    sd = np.sqrt(np.clip(np.diag(fit.cov_z), 0.0, None)) * jac
     return base_result(
         problem,
         method,
-        fit["values"],
-        sd=fit["sd"],
-        z=fit["z"],
-        cov_z=fit["cov_z"],
-        log_post=fit["log_post"],
-        approximate_draws=laplace_draws(problem, fit["z"], fit["cov_z"], seed),
+        problem.values(fit.z),
+        sd=dict(zip(problem.space.names, sd.tolist())),
+        z=fit.z,
+        cov_z=fit.cov_z,
+        log_post=fit.log_post,
+        approximate_draws=laplace_draws(problem, fit.z, fit.cov_z, seed),
         diagnostics={
-            "converged": bool(np.isfinite(fit["log_post"])),
-            "log_posterior": fit["log_post"],
-            "hessian_positive_definite": fit.get("hessian_ok", True),
+            "converged": bool(np.isfinite(fit.log_post)),
+            "log_posterior": fit.log_post,
+            "hessian_positive_definite": fit.hessian_ok,
         },
     )
 
@@ -119,7 +119,7 @@ class ScipyMap(Estimator):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             fits = [map_fit(posterior, st, restarts=1, seed=seed) for st in starts]
-        return map_result(posterior, self.name, max(fits, key=lambda f: f["log_post"]), seed)
+        return map_result(posterior, self.name, max(fits, key=lambda f: f.log_post), seed)
 
 
 def _spectral_starts(posterior: Posterior) -> list[dict[str, float]]:
