@@ -10,6 +10,7 @@ thin layer over these functions.
 from __future__ import annotations
 
 import copy
+import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -103,19 +104,22 @@ def fit(
     """Fit a measured series against the scene that describes the observation.
 
     method: spectral | sindy | casadi | map | mcmc | auto (spectral -> SINDy -> casadi -> emcee,
-    each seeding the next). `chain` is the emcee checkpoint (HDF5; `resume` continues it).
+    each seeding the next). `chain` is the emcee checkpoint (HDF5; `resume` continues it); without
+    it the sampler checkpoints to a temporary file that is removed afterwards.
     """
     from vibinverse.pipeline import run
 
     if workers < 1 or max_steps < 1:
         raise InputError("workers and max_steps: must be >= 1")
+    if resume and chain is None:
+        raise InputError("resume: needs the chain (checkpoint) file of the run to continue")
     post = posterior(series, scene, free=free, model=model, overrides=overrides)
-    with scene_errors():
+    with scene_errors(), tempfile.TemporaryDirectory(prefix="vibinverse-") as tmp:
         return run(
             post,
             method,
             seed=seed,
-            backend=Path(chain) if chain else None,
+            backend=Path(chain) if chain else Path(tmp) / "chain.h5",  # no checkpoint asked for: a temporary one
             resume=resume,
             workers=workers,
             max_steps=max_steps,

@@ -7,6 +7,7 @@ one line on stderr naming the problem, with no traceback and no partial output f
 from __future__ import annotations
 
 import logging
+import os
 import sys
 
 from forward.errors import SceneError as ForwardSceneError
@@ -30,6 +31,8 @@ class _ConsoleHandler(logging.Handler):
         try:
             stream.write(self.format(record) + "\n")
             stream.flush()
+        except BrokenPipeError:  # the reader stopped (e.g. head): `main` ends quietly
+            raise
         except Exception:  # noqa: BLE001 - logging must never raise
             self.handleError(record)
 
@@ -68,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
         print("vibinverse: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # output piped into a reader that stopped (e.g. head)
-        sys.stderr.close()
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
         return 0
     return 0
 

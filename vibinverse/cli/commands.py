@@ -250,15 +250,22 @@ def _estimator_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _verbosity_options(parser: argparse.ArgumentParser, default: object) -> None:
+    loud = parser.add_mutually_exclusive_group()
+    loud.add_argument("-q", "--quiet", action="store_true", default=default, help="print errors and warnings only")
+    loud.add_argument(
+        "-v", "--verbose", action="store_true", default=default, help="also print the stages' details (debug log)"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="vibinverse", description="Passive optical vibrometry: simulate and invert pixel intensity series."
     )
     p.add_argument("--version", action="version", version=f"vibinverse {__version__}")
+    _verbosity_options(p, False)
     verbosity = argparse.ArgumentParser(add_help=False)
-    loud = verbosity.add_mutually_exclusive_group()
-    loud.add_argument("-q", "--quiet", action="store_true", help="print errors and warnings only")
-    loud.add_argument("-v", "--verbose", action="store_true", help="also print the stages' details (debug log)")
+    _verbosity_options(verbosity, argparse.SUPPRESS)  # before or after the verb; not reset by the verb
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     sim = sub.add_parser(
