@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
+from forward.errors import SceneError
 from forward.solar import sun_angles
-from vibinverse.errors import VibinverseError
 
 
 def test_sun_position_equinox_noon_and_below_horizon():
@@ -17,5 +17,5 @@ def test_sun_position_equinox_noon_and_below_horizon():
     # morning sun in the east: scene azimuth (from +x = east) near 0
     el, az = sun_angles("2026-03-20", 7.0, 0.0, 0.0)
     assert 0 < el < 0.5 and abs(az) < 0.1
-    with pytest.raises(VibinverseError, match=r"sun\.hour: the sun is below the horizon"):
+    with pytest.raises(SceneError, match=r"sun\.hour: the sun is below the horizon"):
         sun_angles("2026-03-20", 0.0, 0.0, 0.0)

@@ -73,7 +73,6 @@ def test_plate_map_recovers_the_truth_and_its_sd_is_the_cramer_rao_bound():
     assert summary["data"]["model"]["kind"] == "taylor2"
 
 
-@pytest.mark.slow
 def test_data_in_other_units_are_absorbed_by_the_gain():
     """A sensor in digital numbers: the same series x 1000. The default gain prior follows the
     mean level, sun.irradiance comes out 1000x, and the amplitude is unchanged."""

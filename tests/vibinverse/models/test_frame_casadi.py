@@ -7,6 +7,7 @@ from tests.conftest import SNR10, K, frame_problem
 from vibinverse.pipeline import run
 
 
+@pytest.mark.slow
 def test_casadi_objective_equals_the_numpy_posterior_and_its_map_agrees():
     from vibinverse.models.frame_casadi import CasadiFrameObjective
 
