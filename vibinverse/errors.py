@@ -7,7 +7,7 @@ place (`vibinverse.cli.EXIT_CODES`).
     │   ├── DataError     a measured series or its file                          (exit 2)
     │   └── Unsupported   a method does not cover this model or these values     (exit 2)
     ├── NumericalError    a computation failed on valid input (no optimum, ...)  (exit 3)
-    └── Interrupted       SIGINT or SIGTERM stopped a run; its checkpoint is intact (exit 130)
+    └── Interrupted       SIGINT or SIGTERM stopped a run; its checkpoint is intact (exit 130 / 143)
 
 Every message is one line that names the field and, where there is one, the allowed range.
 """
@@ -45,7 +45,11 @@ class NumericalError(VibinverseError, RuntimeError):
 
 
 class Interrupted(VibinverseError):
-    """SIGINT/SIGTERM stopped a run after a complete step; its checkpoint is intact."""
+    """SIGINT/SIGTERM stopped a run (a sampler after a complete step: its checkpoint is intact)."""
+
+    def __init__(self, message: str, signum: int = 2):
+        super().__init__(message)
+        self.signum = signum
 
 
 @contextlib.contextmanager

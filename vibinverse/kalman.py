@@ -11,17 +11,25 @@ tests.
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import expm, solve_discrete_lyapunov
 
 try:
+    import numba
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a dependency; this keeps the module importable
 
     def njit(*args, **kwargs):
         return (lambda f: f) if not (args and callable(args[0])) else args[0]
+else:
+    if not numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR unset: compiled kernels go to the user's cache,
+        # never into the installed package (a later editable install would leave them as a shadow package)
+        numba.config.CACHE_DIR = os.path.join(
+            os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "vibinverse", "numba"
+        )
 
 
 _LOG_2PI = math.log(2.0 * math.pi)

@@ -67,3 +67,14 @@ def test_free_priors_by_string_and_errors_are_one_hierarchy():
     with pytest.raises(vi.InputError, match="--method"):
         vi.fit(s, scene, method="nope")
     assert issubclass(vi.SceneError, vi.InputError) and issubclass(vi.InputError, vi.VibinverseError)
+
+
+def test_api_functions_stay_bound_when_their_namesake_submodules_load():
+    import vibinverse.design.sweep  # loads the package `vibinverse.design`
+    import vibinverse.posterior  # noqa: F401
+
+    assert callable(vi.design) and callable(vi.posterior)
+    rows = vi.design(
+        builtin_scene("roof_elastic"), vary=["sensor.offset=0.01,0.02"], overrides=["footprint.resolution=32"]
+    )
+    assert len(rows["rows"]) == 2 and callable(vi.design)

@@ -47,3 +47,28 @@ def test_kalman_equals_celerite2_sho():
     y = 20 * np.sin(w0 * t + rng.uniform(0, 6)) * np.exp(-0.01 * t) + rng.normal(0, sig, t.size)
     ours = log_likelihood(y, phi, q, np.array([1.0, 0.0]), sig**2, stationary_covariance(phi, q))
     assert ours == pytest.approx(gp.log_likelihood(y), abs=1e-6)
+
+
+def test_compiled_kernels_are_cached_outside_the_package(tmp_path):
+    """numba's cache goes to the user's cache directory: a cache inside an installed package
+    outlives an uninstall and shadows a later editable install."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import vibinverse
+
+    package = Path(vibinverse.__file__).parent
+    before = set(package.rglob("*.nbi"))
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(tmp_path)
+    code = (
+        "import numpy as np\n"
+        "from vibinverse.kalman import log_likelihood\n"
+        "print(log_likelihood(np.zeros(8), np.eye(2) * 0.5, np.eye(2), np.ones(2), 1.0, np.eye(2)))\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert r.returncode == 0, r.stderr
+    assert set(package.rglob("*.nbi")) == before
+    assert list((tmp_path / "vibinverse" / "numba").rglob("*.nbi"))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import sys
 
 from forward.errors import SceneError as ForwardSceneError
@@ -15,12 +16,12 @@ from vibinverse.errors import InputError, Interrupted, NumericalError, Vibinvers
 
 # the most specific class first; forward's scene errors count as input errors
 EXIT_CODES: tuple[tuple[type[BaseException], int], ...] = (
-    (Interrupted, 130),
     (InputError, 2),
     (ForwardSceneError, 2),
     (NumericalError, 3),
     (VibinverseError, 1),
 )
+SIGNAL_EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number, as shells report it
 
 
 class _ConsoleHandler(logging.Handler):
@@ -50,31 +51,50 @@ def configure_logging(quiet: bool = False, verbose: bool = False) -> None:
 
 
 def exit_code(exc: BaseException) -> int:
-    """The exit code of an error (`EXIT_CODES`)."""
+    """The exit code of an error (`EXIT_CODES`; an interruption by its signal, `SIGNAL_EXIT`)."""
+    if isinstance(exc, Interrupted):
+        return SIGNAL_EXIT.get(exc.signum, 130)
     return next(code for cls, code in EXIT_CODES if isinstance(exc, cls))
 
 
-def main(argv: list[str] | None = None) -> int:
-    from vibinverse.cli.commands import build_parser
+def _terminate(signum: int, frame: object) -> None:
+    """SIGTERM outside a sampler: stop like Ctrl-C (a sampler installs its own handler, which
+    finishes the current step and flushes the checkpoint first)."""
+    raise Interrupted("terminated", signum=signum)
 
-    configure_logging()
+
+def main(argv: list[str] | None = None) -> int:
+    previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
     try:
+        from vibinverse.cli.commands import build_parser
+
+        configure_logging()
         args = build_parser().parse_args(argv)
         configure_logging(getattr(args, "quiet", False), getattr(args, "verbose", False))
         args.func(args)
+    except Interrupted as exc:
+        print(f"vibinverse: {exc}", file=sys.stderr)
+        return exit_code(exc)
     except (VibinverseError, ForwardSceneError) as exc:
-        print(
-            f"vibinverse: error: {exc}" if not isinstance(exc, Interrupted) else f"vibinverse: {exc}", file=sys.stderr
-        )
+        print(f"vibinverse: error: {exc}", file=sys.stderr)
         return exit_code(exc)
     except KeyboardInterrupt:
         print("vibinverse: interrupted", file=sys.stderr)
-        return 130
+        return SIGNAL_EXIT[signal.SIGINT]
     except BrokenPipeError:  # output piped into a reader that stopped (e.g. head)
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
         return 0
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     return 0
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
 
 
 if __name__ == "__main__":

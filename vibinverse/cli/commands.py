@@ -11,7 +11,7 @@ from pathlib import Path
 from forward.reduce import DEFAULT_RTOL, compile_scene
 from vibinverse import __version__, api
 from vibinverse.errors import InputError, scene_errors
-from vibinverse.io.atomic import write_all
+from vibinverse.io.atomic import check_paths, write_all
 from vibinverse.io.builtin import builtin_scene
 from vibinverse.io.scenes import read_scene
 from vibinverse.io.simulation import plot_series, write_series_csv
@@ -61,6 +61,7 @@ def _simulate_to(
 def cmd_simulate(args: argparse.Namespace) -> None:
     if not (0 < args.rtol < float("inf")):
         raise InputError(f"--rtol: {args.rtol:g} is outside the allowed range (0, inf)")
+    check_paths({"-o": args.output, "--plot": args.plot}, {"scene": args.scene})
     s = _simulate_to(
         Path(args.scene),
         args.set or [],
@@ -131,6 +132,8 @@ def cmd_fit(args: argparse.Namespace) -> None:
     if args.workers < 1 or args.max_steps < 1:
         raise InputError("--workers and --max-steps: must be >= 1")
     out, summary_path = Path(args.output), Path(args.summary)
+    chain = Path(args.chain) if args.chain else out.with_suffix(".chain.h5")
+    check_paths({"-o": out, "--summary": summary_path, "--chain": chain}, {"data": args.data, "--scene": args.scene})
     for p in (out, summary_path):
         if not p.parent.is_dir():
             raise InputError(f"output: cannot write {p}: no such directory")
@@ -138,7 +141,6 @@ def cmd_fit(args: argparse.Namespace) -> None:
     table = api.load_scene(args.scene, args.set or [])
     free = parse_free(args.free or [], table.get("infer"))
     logger.info(f"data: {series.describe()}")
-    chain = Path(args.chain) if args.chain else out.with_suffix(".chain.h5")
     result = api.fit(
         series,
         table,
@@ -167,6 +169,7 @@ def cmd_report(args: argparse.Namespace) -> None:
     from vibinverse.report import write_report
 
     out = _output_dir(args.output)
+    check_paths({"-o": out / "report.html"}, {"result": args.result})
     path = write_report(Path(args.result), out)
     logger.info(f"wrote {path}")
 
@@ -207,6 +210,7 @@ def _short(v: object) -> str:
 
 def cmd_bench(args: argparse.Namespace) -> None:
     targets = [Path(p) for p in (args.json, args.plot) if p]
+    check_paths({"--json": args.json, "--plot": args.plot}, {})
     for p in targets:  # fail before the long run, not after it
         if not p.parent.is_dir():
             raise InputError(f"output: cannot write {p}: no such directory")

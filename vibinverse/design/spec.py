@@ -27,6 +27,9 @@ from vibinverse.scene_keys import set_value
 DESIGN_KEYS = ("sensor.offset", "footprint.center", "footprint.center_x", "footprint.center_y", "footprint.width")
 CATEGORICAL = ("sensor.polarizer", "sensor.radiometry", ".material")  # keys (or key endings) taking words
 
+MAX_VALUES = 10_000  # values on one axis
+MAX_CONFIGURATIONS = 50_000  # configurations in one sweep
+
 
 @dataclass(frozen=True)
 class Axis:
@@ -59,6 +62,8 @@ def parse_vary(spec: str) -> Axis:
             raise SceneError(f"--vary {key}: num must be an integer >= 1, got {parts[2]!r}") from None
         if num < 1:
             raise SceneError(f"--vary {key}: empty range (num = {num}); allowed num >= 1")
+        if num > MAX_VALUES:
+            raise SceneError(f"--vary {key}: {num} values; allowed 1..{MAX_VALUES} per axis")
         return Axis(key, tuple(float(v) for v in np.linspace(start, stop, num)))
     items = [p.strip() for p in text.split(",")]
     if any(not p for p in items):
@@ -132,7 +137,15 @@ def _coordinate(v: Any, key: str) -> float:
 
 
 def grid(axes: list[Axis]) -> list[dict[str, Any]]:
-    """Every combination of the axes' values (the first axis varies slowest)."""
+    """Every combination of the axes' values (the first axis varies slowest); a sweep of more than
+    MAX_CONFIGURATIONS is refused before any is built (at ~1-10 ms each it would run for hours)."""
+    count = math.prod(len(a.values) for a in axes)
+    if count > MAX_CONFIGURATIONS:
+        sizes = " x ".join(f"{len(a.values)} ({a.key})" for a in axes)
+        raise SceneError(
+            f"--vary: {sizes} = {count:,} configurations; allowed at most {MAX_CONFIGURATIONS:,}: "
+            "sweep fewer values or fewer axes"
+        )
     configs: list[dict[str, Any]] = [{}]
     for axis in axes:
         configs = [{**c, axis.key: v} for c in configs for v in axis.values]

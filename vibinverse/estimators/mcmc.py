@@ -4,6 +4,8 @@ a progress bar."""
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
 import signal
 import warnings
@@ -13,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import emcee
+import h5py
 import numpy as np
 
 from vibinverse.errors import InputError, Interrupted
@@ -37,10 +40,10 @@ def _worker_log_prob(z: np.ndarray) -> float:
 
 @contextmanager
 def _stop_on_signals():
-    flag = {"stop": False}
+    flag = {"stop": False, "signum": signal.SIGINT}
 
     def handler(signum, frame):
-        flag["stop"] = True
+        flag["stop"], flag["signum"] = True, signum
 
     old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -48,6 +51,62 @@ def _stop_on_signals():
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+
+
+IDENTITY_ATTR = "vibinverse_identity"
+
+
+def identity(problem: Posterior) -> dict[str, str]:
+    """What a checkpoint belongs to: hashes of the data and the scene, the model, the free
+    parameters and their priors. `--resume` continues only a checkpoint of the same."""
+    series = problem.series
+
+    def digest(data: bytes) -> str:
+        return hashlib.sha256(data).hexdigest()[:16]
+
+    return {
+        "data": digest(np.ascontiguousarray(series.time).tobytes() + np.ascontiguousarray(series.intensity).tobytes()),
+        "scene": digest(json.dumps(problem.model.base, sort_keys=True, default=str).encode()),
+        "model": problem.model.name,
+        "free parameters": ", ".join(problem.space.names),
+        "priors": "; ".join(str(p) for p in problem.space.priors),
+    }
+
+
+def _open_checkpoint(path: Path, resume: bool, ident: dict[str, str]) -> emcee.backends.HDFBackend:
+    """emcee's HDF5 backend at `path`; one-line errors for a file that is not a checkpoint, and for
+    `resume` of a checkpoint written for other data, scene, model, free parameters or priors."""
+    if path.is_dir():
+        raise InputError(f"--chain: {path} is a directory; give a file path for the checkpoint")
+    if path.exists():
+        if not h5py.is_hdf5(path):
+            raise InputError(f"--chain: {path} exists and is not an HDF5 checkpoint; remove it or choose another path")
+        try:
+            with h5py.File(path, "r") as fh:
+                stored = fh.attrs.get(IDENTITY_ATTR)
+                has_chain = "mcmc" in fh
+        except OSError as exc:
+            raise InputError(f"--chain: cannot read the checkpoint {path}: {exc}") from None
+        if resume and has_chain:
+            if stored is None:
+                raise InputError(
+                    f"--resume: {path} carries no identity (not written by this vibinverse); "
+                    "run without --resume to start afresh"
+                )
+            old = json.loads(stored)
+            differ = [k for k in ident if old.get(k) != ident[k]]
+            if differ:
+                raise InputError(
+                    f"--resume: the checkpoint {path} was written for other {', '.join(differ)}; "
+                    "resume with the same data, scene and priors, or run without --resume"
+                )
+    return emcee.backends.HDFBackend(str(path))
+
+
+def _ignore_signals() -> None:
+    """Pool workers leave SIGINT and SIGTERM to the parent, which stops them after a complete step."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 def run(
@@ -66,9 +125,12 @@ def run(
     """Sample until converged or `max_steps`; returns chain, log_prob, tau and the stopping facts."""
     ndim = z_map.size
     nwalkers = nwalkers or max(2 * ndim + 2, 16)
-    backend = emcee.backends.HDFBackend(str(backend_path))
+    ident = identity(problem)
+    backend = _open_checkpoint(backend_path, resume, ident)
     if not resume or not backend_path.exists() or backend.iteration == 0:
         backend.reset(nwalkers, ndim)
+        with h5py.File(backend_path, "a") as fh:  # before the first step: a killed run's file has it too
+            fh.attrs[IDENTITY_ATTR] = json.dumps(ident)
         rng = np.random.default_rng(seed)
         chol = np.linalg.cholesky(cov_z + 1e-12 * np.eye(ndim))
         start = z_map + 0.3 * rng.normal(size=(nwalkers, ndim)) @ chol.T
@@ -78,7 +140,7 @@ def run(
         state = backend.get_last_sample()
     global _WORKER_PROBLEM
     _WORKER_PROBLEM = problem
-    pool = get_context("fork").Pool(workers) if workers > 1 else None
+    pool = get_context("fork").Pool(workers, initializer=_ignore_signals) if workers > 1 else None
     converged, tau = False, np.full(ndim, np.inf)
     try:
         sampler = emcee.EnsembleSampler(
@@ -90,7 +152,11 @@ def run(
             if not converged and remaining > 0:
                 for _ in sampler.sample(state, iterations=remaining, progress=progress, store=True):
                     if flag["stop"]:
-                        raise Interrupted(f"interrupted after {backend.iteration} steps; resume with --resume")
+                        raise Interrupted(
+                            f"interrupted after {backend.iteration} steps; the checkpoint {backend_path} is intact: "
+                            "resume with --resume",
+                            signum=flag["signum"],
+                        )
                     if backend.iteration % CHECK_EVERY == 0:
                         converged, tau = _converged(backend)
                         if converged:

@@ -11,6 +11,25 @@ from pathlib import Path
 from vibinverse.errors import InputError
 
 
+def check_paths(outputs: dict[str, str | Path | None], inputs: dict[str, str | Path | None]) -> None:
+    """Refuse, before any work, an output that is a directory, two outputs at one path, and an output
+    at an input's path (that would replace the input). Keys name the options in the message."""
+    seen: dict[Path, str] = {}
+    ins = {Path(p).resolve(): k for k, p in inputs.items() if p is not None}
+    for key, p in outputs.items():
+        if p is None:
+            continue
+        path = Path(p)
+        if path.is_dir():
+            raise InputError(f"{key}: {path} is a directory; give a file path")
+        real = path.resolve()
+        if real in ins:
+            raise InputError(f"{key}: {path} is also the input {ins[real]}; writing it would replace the input")
+        if real in seen:
+            raise InputError(f"{key}: {path} is also the output {seen[real]}; give each output its own path")
+        seen[real] = key
+
+
 @contextlib.contextmanager
 def staged(paths: list[Path]) -> Iterator[list[Path]]:
     """Yield temporary paths beside `paths`; on success move them all into place, else delete them.
@@ -39,6 +58,7 @@ def staged(paths: list[Path]) -> Iterator[list[Path]]:
 def write_all(writers: dict[Path, Callable[[Path], None]]) -> None:
     """Run each writer on a temporary file, then move every file into place together."""
     targets = list(writers)
+    check_paths({str(p): p for p in targets}, {})
     with staged(targets) as temps:
         for tmp, target in zip(temps, targets):
             writers[target](tmp)

@@ -304,3 +304,39 @@ def test_cli_writes_csv_json_and_maps_and_workers_agree(tmp_path, capsys):
     assert len(a) == 11 and a == b
     for png in ("design_sensitivity.png", "design_crlb.png"):
         assert (tmp_path / "a" / png).read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize(
+    "make_args, message",
+    [
+        (lambda d: ["fit", d["csv"], "--scene", ROOF, "-o", d["csv"], "--summary", d["json"]], "replace the input"),
+        (lambda d: ["fit", d["csv"], "--scene", ROOF, "-o", d["nc"], "--summary", ROOF], "replace the input"),
+        (lambda d: ["fit", d["csv"], "--scene", ROOF, "-o", d["nc"], "--summary", d["nc"]], "its own path"),
+        (lambda d: ["simulate", ROOF, "-o", ROOF], "replace the input"),
+        (lambda d: ["simulate", ROOF, "-o", d["csv2"], "--plot", d["csv2"]], "its own path"),
+        (lambda d: ["simulate", ROOF, "-o", d["dir"]], "is a directory"),
+    ],
+)
+def test_an_output_never_replaces_an_input_or_another_output(tmp_path, make_args, message):
+    d = {
+        "csv": str(tmp_path / "data.csv"),
+        "json": str(tmp_path / "s.json"),
+        "nc": str(tmp_path / "r.nc"),
+        "csv2": str(tmp_path / "new.csv"),
+        "dir": str(tmp_path),
+    }
+    assert run_cli("simulate", ROOF, *FAST, "--seed", "1", "-o", d["csv"]).returncode == 0
+    files = {p: p.read_bytes() for p in [tmp_path / "data.csv", *map(__import__("pathlib").Path, [ROOF])]}
+    r = run_cli(*make_args(d))
+    assert r.returncode == 2 and message in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert all(p.read_bytes() == b for p, b in files.items())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data.csv"]
+
+
+def test_quiet_and_verbose_before_or_after_the_verb(tmp_path):
+    out = tmp_path / "a.csv"
+    for args in (["-q", "simulate", ROOF, *FAST, "-o", str(out)], ["simulate", "-q", ROOF, *FAST, "-o", str(out)]):
+        r = run_cli(*args)
+        assert r.returncode == 0 and r.stdout == "" and out.exists(), r.stderr
+    r = run_cli("simulate", ROOF, *FAST, "-o", str(out))
+    assert "sensitivity S =" in r.stdout

@@ -42,3 +42,14 @@ def test_design_keys_place_view_and_footprint():
     assert scene.footprint.x == (-25.0, 25.0) and scene.footprint.y == (-25.0, 25.0)
     scene = scene_from_table(configure(base, {"footprint.width": 20.0}))
     assert scene.footprint.x == (0.0, 20.0) and scene.footprint.y == (0.0, 20.0)
+
+
+def test_sweeps_too_large_to_run_are_refused_before_any_work():
+    from vibinverse.design.spec import MAX_CONFIGURATIONS, grid
+
+    with pytest.raises(VibinverseError, match=r"100000 values; allowed 1\.\.10000 per axis"):
+        parse_vary("sensor.offset=0:1:100000")
+    axes = [parse_vary(f"k{i}=0:1:30") for i in range(4)]  # 30^4 = 810 000 configurations
+    with pytest.raises(VibinverseError, match="810,000 configurations; allowed at most"):
+        grid(axes)
+    assert len(grid([parse_vary("a=0:1:200"), parse_vary("b=0:1:250")])) == MAX_CONFIGURATIONS

@@ -81,3 +81,69 @@ def test_interrupted_run_resumes_to_the_same_samples(short_data):
         assert a["mcmc"].attrs["iteration"] == b["mcmc"].attrs["iteration"] == steps
         np.testing.assert_array_equal(a["mcmc/chain"][...], b["mcmc/chain"][...])
     assert json.loads((d / "cut.json").read_text())["diagnostics"]["n_steps"] == steps
+
+
+def _interrupt(d, name, sig, *extra, steps=800):
+    """Start a fit, send `sig` once sampling runs, return (return code, stderr)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "vibinverse", *fit_args(d, name, *extra, steps=steps)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    for line in proc.stdout:
+        if line.startswith("sampling with emcee"):
+            break
+    time.sleep(1.5)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
+    return proc.returncode, err
+
+
+@pytest.mark.slow
+def test_sigterm_exits_143_and_workers_stop_without_tracebacks(short_data):
+    d = short_data
+    code, err = _interrupt(d, "term", signal.SIGTERM)
+    assert code == 143 and "resume with --resume" in err and "Traceback" not in err, err
+    assert len(err.strip().splitlines()) == 1, err
+    # with a pool, Ctrl-C reaches the workers too (one process group): they leave it to the parent
+    code, err = _interrupt(d, "pool", signal.SIGINT, "--workers", "2")
+    assert code == 130 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not (d / "pool.nc").exists() and not (d / "term.nc").exists()
+
+
+def test_resume_refuses_a_checkpoint_of_other_data_scene_or_priors(short_data, tmp_path):
+    d = short_data
+    first = run_cli(*fit_args(d, "ident", steps=100))
+    assert first.returncode == 0, first.stderr
+    other = tmp_path / "other.csv"
+    text = (d / "data.csv").read_text().splitlines()
+    k = next(i for i, ln in enumerate(text) if ln and ln[0].isdigit())
+    t, y, *rest = text[k + 5].split(",")
+    text[k + 5] = ",".join([t, repr(float(y) + 1e-3), *rest])  # one sample changed
+    other.write_text("\n".join(text) + "\n")
+    chain = str(d / "ident.chain.h5")
+    before = (d / "ident.chain.h5").read_bytes()
+    args = fit_args(d, "ident2", "--resume", "--chain", chain, steps=200)
+    r = run_cli(*[str(other) if a == str(d / "data.csv") else a for a in args])
+    assert r.returncode == 2 and "other data" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    r = run_cli(*args, "--free", "noise.sigma=loguniform(1e-3, 1)")
+    assert r.returncode == 2 and "other free parameters" in r.stderr, r.stderr
+    r = run_cli(*args, "--set", "sensor.inclination=pi/3+0.012")
+    assert r.returncode == 2 and "other scene" in r.stderr, r.stderr
+    assert (d / "ident.chain.h5").read_bytes() == before  # refused before touching the checkpoint
+    assert not (d / "ident2.nc").exists()
+
+
+def test_a_corrupt_or_foreign_checkpoint_is_a_one_line_error(short_data, tmp_path):
+    d = short_data
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 64)  # an HDF5 signature and then garbage
+    for path in (bad, tmp_path):
+        r = run_cli(*fit_args(d, "bad", "--resume", "--chain", str(path), steps=100))
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+    text = tmp_path / "notes.h5"
+    text.write_text("not a checkpoint")
+    r = run_cli(*fit_args(d, "bad", "--chain", str(text), steps=100))
+    assert r.returncode == 2 and "not an HDF5 checkpoint" in r.stderr, r.stderr
+    assert text.read_text() == "not a checkpoint"
