@@ -2,12 +2,14 @@
 and deterministic models, built-in scene tables, the quick study results and the command line."""
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import settings
 
 from forward.scene_file import apply_overrides, load_scene, read_table, scene_from_table
 from forward.sensor import observe
@@ -21,6 +23,11 @@ from vibinverse.scene_keys import set_value
 from vibinverse.studies import STUDIES
 
 SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
+
+# property-based tests: a bounded, reproducible run by default (CI); HYPOTHESIS_PROFILE=long for more
+settings.register_profile("ci", max_examples=25, derandomize=True, deadline=None, print_blob=True)
+settings.register_profile("long", max_examples=500, deadline=None, print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 K = "surfaces.roof.motion."  # the roof's motion keys (frame and plate scenes)
 G = "surfaces.ground.motion."  # the ground's motion keys
