@@ -49,14 +49,7 @@ def _series(series: SeriesLike) -> Series:
 def series(time: Any, intensity: Any, *, scene: Mapping[str, Any] | None = None, source: str = "array") -> Series:
     """A validated series from arrays (NaN intensities are gaps); `scene`, when the data were
     simulated from one, gives the summary its true values."""
-    import numpy as np
-
-    return validate(
-        np.asarray(time, dtype=float),
-        np.asarray(intensity, dtype=float),
-        source,
-        None if scene is None else dict(scene),
-    )
+    return validate(time, intensity, source, None if scene is None else dict(scene))
 
 
 def _priors(free: Mapping[str, Prior | str] | None, table: dict[str, Any]) -> dict[str, Prior] | None:

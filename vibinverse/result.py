@@ -3,7 +3,8 @@ netCDF file."""
 
 from __future__ import annotations
 
-import json
+import math
+import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -12,7 +13,8 @@ from typing import Any
 import numpy as np
 
 from vibinverse.errors import DataError
-from vibinverse.io.series import Series
+from vibinverse.io import jsonio
+from vibinverse.io.series import Series, check_file, netcdf_format
 from vibinverse.priors import Prior
 
 
@@ -71,7 +73,8 @@ class FitResult:
         """The JSON summary: per parameter median, mean, sd, q05, q95, map, truth, prior.
 
         With posterior draws the numbers are their quantiles; without them (spectral, SINDy, MAP)
-        the interval is MAP +- 1.645 sd from the Laplace approximation, or null without an sd.
+        the interval is the Laplace approximation's, formed in the unconstrained space
+        (`_approximate_interval`), or null without an sd.
         """
         draws = self.draws
         params = {}
@@ -82,7 +85,8 @@ class FitResult:
                 entry = {"median": q50, "mean": d.mean(), "sd": d.std(ddof=1), "q05": q05, "q95": q95}
             elif self.sd is not None and np.isfinite(self.sd.get(n, np.nan)):
                 m, s = self.point[n], self.sd[n]
-                entry = {"median": m, "mean": m, "sd": s, "q05": m - 1.645 * s, "q95": m + 1.645 * s}
+                q05, q95 = self._approximate_interval(j, m, s)
+                entry = {"median": m, "mean": m, "sd": s, "q05": q05, "q95": q95}
             else:
                 m = self.point[n]
                 entry = {"median": m, "mean": m, "sd": None, "q05": None, "q95": None}
@@ -99,10 +103,24 @@ class FitResult:
             "data": self.data,
         }
 
+    def _approximate_interval(self, j: int, m: float, s: float) -> tuple[float, float]:
+        """The 90 % interval without draws: of the Laplace approximation in the samplers'
+        unconstrained space (logit or log of a bounded prior), mapped back, so that it stays inside
+        the prior (a positive parameter never gets a negative bound); without that covariance,
+        m +- 1.645 s cut to the prior's support."""
+        prior = self.priors[j]
+        if self.z is not None and self.cov_z is not None and np.isfinite(self.cov_z[j, j]):
+            half = 1.645 * float(np.sqrt(max(self.cov_z[j, j], 0.0)))
+            z = float(self.z[j])
+            return prior.from_unbounded(z - half), prior.from_unbounded(z + half)
+        lo, hi = prior.bounds
+        return max(m - 1.645 * s, lo), min(m + 1.645 * s, hi)
+
     def to_inference_data(self) -> Any:
         """ArviZ InferenceData: posterior (chain = walker, draw; without a sampler one 'chain' of
         Laplace draws), sample_stats (lp), observed_data, constant_data (time and the predictive
-        bands), and the JSON summary in the observed data's attributes."""
+        bands), and the JSON summary in the observed data's attributes (strict JSON: a non-finite
+        number is null there, named in its "non_finite" record; `read_result` restores it)."""
         import arviz as az
 
         chains = (
@@ -112,8 +130,8 @@ class FitResult:
         )
         posterior = None if chains is None else {_safe(n): chains[..., j] for j, n in enumerate(self.names)}
         attrs = {
-            "vibinverse_summary": json.dumps(self.summary()),
-            "parameter_names": json.dumps({_safe(n): n for n in self.names}),
+            "vibinverse_summary": jsonio.dumps(self.summary()),
+            "parameter_names": jsonio.dumps({_safe(n): n for n in self.names}),
         }
         series = self.series
         with warnings.catch_warnings():
@@ -151,7 +169,7 @@ def detections(diagnostics: dict[str, Any]) -> list[Detection]:
             out.append(
                 Detection(
                     what.replace("_", " "),
-                    diagnostics[f"{what}_delta_loglike"],
+                    diagnostics.get(f"{what}_delta_loglike", math.nan),
                     diagnostics.get(f"{what}_threshold", DETECTION_GAIN),
                     bool(detected),
                 )
@@ -160,18 +178,102 @@ def detections(diagnostics: dict[str, Any]) -> list[Detection]:
 
 
 def read_result(path: str | Path) -> tuple[dict[str, Any], Any]:
-    """(summary dict, InferenceData) from a result netCDF."""
+    """(summary dict, InferenceData) from a result netCDF written by `FitResult.to_netcdf`.
+
+    A file that is missing, empty, not netCDF-4, truncated, corrupt, or not a vibinverse result
+    (no summary, a summary that is not the one `FitResult.summary` writes, no data) raises
+    DataError with one line naming the file and what is wrong.
+    """
     import arviz as az
 
+    p = check_file(path, "result")
+    if netcdf_format(p, "result") != "hdf5":
+        raise DataError(f"result: {p} is a netCDF-3 file, not a vibinverse result (those are netCDF-4/HDF5)")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            idata = az.from_netcdf(str(path), engine="h5netcdf")
-        return json.loads(idata.observed_data.attrs["vibinverse_summary"]), idata
-    except (OSError, ValueError, KeyError, AttributeError) as exc:
+            idata = az.from_netcdf(str(p), engine="h5netcdf")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, RuntimeError) as exc:
+        raise DataError(f"result: {p} is truncated or corrupt ({_hdf5_reason(exc)})") from None
+    groups = set(idata.groups())
+    attrs = idata.observed_data.attrs if "observed_data" in groups else {}
+    if "vibinverse_summary" not in attrs:
         raise DataError(
-            f"result: cannot read {path}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
-        ) from None
+            f"result: {p} is not a vibinverse result (it has no observed_data group with a vibinverse_summary "
+            f"attribute; groups: {', '.join(sorted(groups)) or 'none'})"
+        )
+    summary = _parse(attrs["vibinverse_summary"], p, "vibinverse_summary")
+    _check_summary(summary, p)
+    for group, var in (("observed_data", "intensity"), ("constant_data", "time")):
+        if group not in groups or var not in idata[group]:
+            raise DataError(f"result: {p} is not a complete vibinverse result (no {group} group with the {var})")
+    n = idata.observed_data["intensity"].size
+    if idata.observed_data["intensity"].ndim != 1 or idata.constant_data["time"].shape != (n,):
+        raise DataError(f"result: {p}: the observed intensity and the constant_data time are not 1-D of equal length")
+    if "posterior" in groups:
+        names = _parse(attrs.get("parameter_names", "{}"), p, "parameter_names")
+        if not isinstance(names, dict):
+            raise DataError(f"result: {p}: attribute parameter_names is not a JSON object")
+        inv = {v: k for k, v in names.items() if isinstance(v, str)}
+        for name in summary["parameters"]:
+            if inv.get(name) not in idata.posterior.data_vars:
+                raise DataError(f"result: {p}: parameter {name!r} has no variable in the posterior group")
+    return summary, idata
+
+
+_NUMERIC = ("median", "mean", "sd", "q05", "q95", "map", "truth")
+
+
+def _parse(text: Any, p: Path, what: str) -> Any:
+    try:
+        return jsonio.loads(text)
+    except (ValueError, TypeError, RecursionError) as exc:
+        raise DataError(f"result: {p}: attribute {what} is not JSON ({_hdf5_reason(exc)})") from None
+
+
+def _check_summary(summary: Any, p: Path) -> None:
+    """One-line DataError unless `summary` has the shape `FitResult.summary` gives it."""
+
+    def bad(what: str) -> DataError:
+        return DataError(f"result: {p}: vibinverse_summary {what}")
+
+    def number(v: Any) -> bool:
+        return v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
+
+    if not isinstance(summary, dict):
+        raise bad(f"is a JSON {type(summary).__name__}, not an object")
+    for key, kind in (("method", str), ("parameters", dict), ("diagnostics", dict), ("timing", dict), ("data", dict)):
+        if not isinstance(summary.get(key), kind):
+            raise bad(f"has no {key!r} {'string' if kind is str else 'object'}")
+    if not summary["parameters"]:
+        raise bad("has no parameters")
+    for name, entry in summary["parameters"].items():
+        if not isinstance(entry, dict):
+            raise bad(f"parameter {name!r} is not an object")
+        for key in _NUMERIC:
+            if not number(entry.get(key)):
+                raise bad(f"parameter {name!r}: {key} is {_short(entry.get(key))}; a number or null is needed")
+        if not isinstance(entry.get("prior", ""), str):
+            raise bad(f"parameter {name!r}: prior is {_short(entry.get('prior'))}; a string is needed")
+        bounds = entry.get("prior_bounds", [None, None])
+        if not (isinstance(bounds, list) and len(bounds) == 2 and all(number(b) for b in bounds)):
+            raise bad(f"parameter {name!r}: prior_bounds is {_short(bounds)}; two numbers (or nulls) are needed")
+    for key, value in summary["timing"].items():
+        if not number(value):
+            raise bad(f"timing {key!r} is {_short(value)}; a number or null is needed")
+    for key in ("source", "description"):
+        if not isinstance(summary["data"].get(key, ""), str):
+            raise bad(f"data {key} is {_short(summary['data'].get(key))}; a string is needed")
+
+
+def _short(v: Any) -> str:
+    text = repr(v)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _hdf5_reason(exc: BaseException) -> str:
+    text = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    return re.sub(r"^\[Errno \d+\] ", "", re.sub(r"^Unable to synchronously open file \((.*)\)$", r"\1", text))
 
 
 def _safe(name: str) -> str:

@@ -47,9 +47,8 @@ def test_inference_data_round_trips_through_netcdf(frame_fit, tmp_path):
     for var in idata.posterior.data_vars:
         np.testing.assert_array_equal(back.posterior[var].values, idata.posterior[var].values)
     np.testing.assert_array_equal(back.observed_data["intensity"].values, frame_fit.series.intensity)
-    assert json.loads(back.observed_data.attrs["vibinverse_summary"]) == json.loads(json.dumps(frame_fit.summary()))
     summary, _ = vi.read_result(path)
-    assert summary["parameters"].keys() == frame_fit.summary()["parameters"].keys()
+    assert summary == json.loads(json.dumps(frame_fit.summary()))
 
 
 def test_free_priors_by_string_and_errors_are_one_hierarchy():

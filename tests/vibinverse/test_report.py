@@ -33,3 +33,103 @@ def test_bound_warning_is_for_a_posterior_cut_by_its_prior_not_for_a_wide_prior(
     assert len(cut) == 1 and "sits at a bound" in cut[0]
     wide = warnings_for(summary(0.5, 0.05, 0.95, "uniform(0, 1)", [0.0, 1.0]), None, ["x"])
     assert len(wide) == 1 and "not informed" in wide[0]
+
+
+# ------------------------------------------------------------------ crafted and incomplete result files
+
+XSS_IMG = "<img src=x onerror=alert(1)>"
+XSS_SCRIPT = "<script>alert(1)</script>"
+
+
+@pytest.fixture(scope="module")
+def result_file(tmp_path_factory):
+    """A valid result netCDF of a quick spectral fit of the plate scene."""
+    import vibinverse as vi
+    from vibinverse.io.builtin import builtin_scene
+
+    scene = vi.load_scene(builtin_scene("roof_elastic"))
+    obs = vi.simulate(scene, seed=1)
+    path = tmp_path_factory.mktemp("result") / "result.nc"
+    vi.fit(vi.series(obs.time, obs.intensity, scene=scene), scene, method="spectral").to_netcdf(path)
+    return path
+
+
+def _craft(src, dst):
+    """`src` with every user-controlled string of its summary replaced by markup."""
+    import json
+
+    import h5py
+
+    dst.write_bytes(src.read_bytes())
+    with h5py.File(dst, "a") as f:
+        attrs = f["observed_data"].attrs
+        summary = json.loads(attrs["vibinverse_summary"])
+        names = json.loads(attrs["parameter_names"])
+        first = next(iter(summary["parameters"]))
+        params = {(XSS_IMG if n == first else n): p for n, p in summary["parameters"].items()}
+        params[XSS_IMG]["prior"] = XSS_IMG
+        summary["parameters"] = params
+        summary["timing"] = {XSS_SCRIPT: 0.5, "fit": None}
+        summary["data"]["source"] = XSS_IMG
+        summary["data"]["description"] = XSS_SCRIPT
+        summary["method"] = XSS_SCRIPT
+        summary["diagnostics"].update(
+            {
+                XSS_SCRIPT: XSS_IMG,
+                "multimodal": [XSS_IMG],
+                f"{XSS_SCRIPT}_detected": False,
+                f"{XSS_SCRIPT}_delta_loglike": 1.0,
+                f"{XSS_SCRIPT}_threshold": XSS_SCRIPT,
+                "sindy": {"status": "ok", "equation": XSS_SCRIPT, "misfit": XSS_IMG},
+                "converged": False,
+                "rhat_max": XSS_IMG,
+            }
+        )
+        attrs["vibinverse_summary"] = json.dumps(summary)
+        attrs["parameter_names"] = json.dumps({k: (XSS_IMG if v == first else v) for k, v in names.items()})
+    return dst
+
+
+def test_a_crafted_result_renders_no_live_markup(result_file, tmp_path):
+    from vibinverse.report import write_report
+
+    page = write_report(_craft(result_file, tmp_path / "crafted.nc"), tmp_path).read_text()
+    assert "<script" not in page.lower()  # the report has no script of its own: any would be injected
+    assert "<img src=x" not in page and page.count("onerror=") == page.count("&lt;img src=x onerror=")
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;" in page and "&lt;img src=x onerror=alert(1)&gt;" in page
+
+
+def test_a_report_of_nulls_and_non_finite_numbers(tmp_path):
+    """Unbounded priors, NaN R-hat, no sd and no predictive bands: the page renders, the warnings
+    say what they can."""
+    import math
+
+    import numpy as np
+
+    import vibinverse as vi
+    from vibinverse.priors import Prior
+    from vibinverse.report import warnings_for, write_report
+    from vibinverse.result import FitResult
+
+    t = np.arange(64) * 0.01
+    result = FitResult(
+        method="mcmc",
+        names=["noise.sigma", "surfaces.roof.motion.frequency"],
+        priors=[Prior("normal", (0.6, 0.1)), Prior("uniform", (1.0, 50.0))],
+        point={"noise.sigma": 0.55, "surfaces.roof.motion.frequency": 20.0},
+        series=vi.series(t, np.sin(2 * np.pi * 20 * t)),
+        sd={"noise.sigma": 0.05, "surfaces.roof.motion.frequency": math.inf},
+        diagnostics={"converged": False, "rhat_max": math.nan, "tau_max": math.inf, "n_steps": 10},
+        timing={"mcmc_s": 1.5},
+    )
+    page = write_report(result.to_netcdf(tmp_path / "r.nc"), tmp_path).read_text()
+    assert "not converged" in page and "noise.sigma" in page
+    # the same summary as strict JSON gives nulls (a result.json read back by json.load)
+    summary = {
+        "diagnostics": {"converged": False, "rhat_max": None, "tau_max": None, "n_steps": None},
+        "parameters": {
+            "x": {"median": 0.5, "q05": 0.4, "q95": 0.6, "prior": "normal(0, 1)", "prior_bounds": [None, None]}
+        },
+    }
+    warn = warnings_for(summary, None, ["x"])
+    assert len(warn) == 1 and "not converged (R-hat n/a" in warn[0]

@@ -4,13 +4,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 from pathlib import Path
 
 from forward.reduce import DEFAULT_RTOL, compile_scene
 from vibinverse import __version__, api
 from vibinverse.errors import InputError, scene_errors
+from vibinverse.io import jsonio
 from vibinverse.io.atomic import check_paths, write_all
 from vibinverse.io.builtin import builtin_scene
 from vibinverse.io.scenes import read_scene
@@ -101,7 +101,7 @@ def cmd_demo(args: argparse.Namespace) -> None:
     write_all(
         {
             out / "result.nc": result.to_netcdf,
-            out / "result.json": lambda p: p.write_text(json.dumps(summary, indent=2)),
+            out / "result.json": lambda p: p.write_text(jsonio.dumps(summary, indent=2)),
         }
     )
     report = write_report(out / "result.nc", out)
@@ -154,7 +154,7 @@ def cmd_fit(args: argparse.Namespace) -> None:
         progress=not args.no_progress,
     )
     summary = result.summary()
-    write_all({out: result.to_netcdf, summary_path: lambda p: p.write_text(json.dumps(summary, indent=2))})
+    write_all({out: result.to_netcdf, summary_path: lambda p: p.write_text(jsonio.dumps(summary, indent=2))})
     for name, v in summary["parameters"].items():
         interval = "" if v["q05"] is None else f"  90% [{v['q05']:.6g}, {v['q95']:.6g}]"
         truth = "" if v["truth"] is None else f"  truth {v['truth']:.6g}"
@@ -232,7 +232,7 @@ def cmd_bench(args: argparse.Namespace) -> None:
         rows = result["speed_error"]
     writers = {}
     if args.json:
-        writers[Path(args.json)] = lambda p: p.write_text(json.dumps(result, indent=2))
+        writers[Path(args.json)] = lambda p: p.write_text(jsonio.dumps(result, indent=2))
     if args.plot:
         writers[Path(args.plot)] = lambda p: plot_speed_error(rows, p)
     write_all(writers)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-import math
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -19,6 +17,7 @@ from vibinverse.design.plots import plot_design
 from vibinverse.design.ranking import rank
 from vibinverse.design.spec import Axis, configure, grid, parse_vary
 from vibinverse.errors import SceneError
+from vibinverse.io import jsonio
 from vibinverse.io.atomic import write_all
 
 PAPER_THRESHOLD = 1e-4  # the paper's detectability threshold on the sensitivity (21)
@@ -153,7 +152,7 @@ def write_design(result: dict[str, Any], outdir: Path) -> list[Path]:
 
     def js(path: Path) -> None:
         doc = {
-            "best": [_jsonable(r) for r in result["best"]],
+            "best": result["best"],
             "n_configurations": len(rows),
             "n_ok": sum(r.get("status") == "ok" for r in rows),
             "n_detectable": sum(r.get("status") == "ok" and r["sensitivity"] >= result["threshold"] for r in rows),
@@ -162,7 +161,8 @@ def write_design(result: dict[str, Any], outdir: Path) -> list[Path]:
             "axes": {a.key: list(a.values) for a in axes},
             "seconds": result["seconds"],
         }
-        path.write_text(json.dumps(doc, indent=2))
+        # strict JSON: an infinite Cramer-Rao sd (an unidentifiable target) is null, named in "non_finite"
+        path.write_text(jsonio.dumps(doc, indent=2))
 
     writers = {outdir / "design.csv": csv, outdir / "design.json": js}
     for name, draw in plot_design(result).items():
@@ -173,7 +173,3 @@ def write_design(result: dict[str, Any], outdir: Path) -> list[Path]:
 
 def _cell(v: Any) -> str:
     return f"{v:.10g}" if isinstance(v, float) else str(v)
-
-
-def _jsonable(r: dict[str, Any]) -> dict[str, Any]:
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()}

@@ -368,9 +368,9 @@ class DeterministicModel(SignalModel):
         gain = gain_from_level(series, self)
         if gain > 0:  # (NaN when the model or the data have no positive level: the gain stays fixed)
             free["sun.irradiance"] = Prior("loguniform", (gain / 2, gain * 2))
-        free["noise.sigma"] = Prior(
-            "loguniform", (max(1e-9 * scale, 1e-300), 10.0 * float(np.nanstd(series.intensity)))
-        )
+        spread = float(np.nanstd(series.intensity))  # > 0: a constant series is refused on reading
+        # from far below the spread (1e-9 of the level, or 1 % of the spread for data with a huge offset)
+        free["noise.sigma"] = Prior("loguniform", (max(min(1e-9 * scale, 0.01 * spread), 1e-300), 10.0 * spread))
         space = ParameterSpace(free)
         guesses = [
             {n: free[n].inside(g.get(n, free[n].centre())) for n in free}

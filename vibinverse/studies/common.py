@@ -3,7 +3,6 @@ compiler, and writing NAME.png / NAME.csv / NAME.json all-or-nothing."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -14,6 +13,7 @@ from forward.reduce import compile_scene
 from forward.render import pixel_signal, sensitivity
 from forward.scene import Scene
 from forward.scene_file import load_scene
+from vibinverse.io import jsonio
 from vibinverse.io.atomic import write_all
 from vibinverse.io.builtin import builtin_scene
 
@@ -62,7 +62,7 @@ def write_study(
                 fh.write(",".join(f"{curve[c][i]:.10g}" if i < len(curve[c]) else "" for c in cols) + "\n")
 
     def js(path: Path) -> None:
-        path.write_text(json.dumps(_jsonable(summary), indent=2))
+        path.write_text(jsonio.dumps(summary, indent=2))
 
     def png(path: Path) -> None:
         import matplotlib
@@ -76,16 +76,6 @@ def write_study(
         plt.close(fig)
 
     write_all({outdir / f"{name}.png": png, outdir / f"{name}.csv": csv, outdir / f"{name}.json": js})
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple, np.ndarray)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    return x
 
 
 def interior_peak(x: np.ndarray, y: np.ndarray) -> float:

@@ -1,9 +1,13 @@
 """Measured series: the file formats, validation, and what a series can resolve."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from vibinverse.errors import VibinverseError
+import vibinverse as vi
+from vibinverse.errors import DataError, VibinverseError
+from vibinverse.io.builtin import builtin_scene
 from vibinverse.io.series import check_resolves, load_series, validate
 
 
@@ -41,8 +45,144 @@ def test_bad_series(t, x, message):
 
 
 def test_series_too_short_or_too_slow_for_a_frequency():
-    s = validate(np.arange(100) * 0.01, np.zeros(100))
+    s = validate(np.arange(100) * 0.01, np.sin(np.arange(100)))
     with pytest.raises(VibinverseError, match="Nyquist"):
         check_resolves(s, 60.0, "drive_frequency")
     with pytest.raises(VibinverseError, match="3 cycles"):
         check_resolves(s, 1.0, "tilt_frequency")
+
+
+# ------------------------------------------------------------------ files and values that are not a series
+
+CORPUS = Path(__file__).resolve().parents[2] / "corpus" / "data"
+T = np.arange(40) * 0.01
+X = np.sin(2 * np.pi * 5 * T)
+
+
+def _nc(path, intensity=X, time=T, time_attrs=None, coords=True):
+    import xarray as xr
+
+    ds = (
+        xr.Dataset({"intensity": ("time", intensity)}, coords={"time": ("time", time, time_attrs or {})})
+        if coords
+        else xr.Dataset({"intensity": ("i", intensity)})
+    )
+    # complex values are not netCDF: h5netcdf writes them only when told the file may be invalid
+    ds.to_netcdf(path, engine="h5netcdf", invalid_netcdf=np.iscomplexobj(intensity))
+    return path
+
+
+BAD_FILES = {
+    "text.npy": (lambda p: np.save(p, np.array([["a", "b"]] * 20)), "text .*real numbers are needed"),
+    "text.npz": (lambda p: np.savez(p, time=T, intensity=np.array(["b"] * 40)), "intensity holds text"),
+    "complex.npz": (lambda p: np.savez(p, time=T, intensity=X + 1j), "intensity holds complex values"),
+    "complex.npy": (lambda p: np.save(p, np.column_stack([T, X + 0.5j])), "complex values"),
+    "bool.npy": (lambda p: np.save(p, np.ones((40, 2), bool)), "booleans"),
+    "bool.npz": (lambda p: np.savez(p, time=T, intensity=X > 0), "intensity holds booleans"),
+    "object.npy": (lambda p: np.save(p, np.array([[1, 2]] * 20, dtype=object), allow_pickle=True), "Python objects"),
+    "scalar.npy": (lambda p: np.save(p, np.array(3.0)), r"N x 2 array .*got shape \(\)"),
+    "scalar.npz": (lambda p: np.savez(p, time=np.array(1.0), intensity=np.array(2.0)), "1-D"),
+    "three_columns.npy": (
+        lambda p: np.save(p, np.column_stack([T, X, X])),
+        r"exactly 2 columns \(time, intensity\), got 3",
+    ),
+    "transposed.npy": (lambda p: np.save(p, np.vstack([T, X])), r"exactly 2 columns .*transpose"),
+    "dates.npz": (lambda p: np.savez(p, time=np.datetime64("2024-01-01") + np.arange(40), intensity=X), "dates"),
+    "truncated.npz": (lambda p: p.write_bytes(b"PK\x03\x04 not a zip"), "cannot read"),
+    "text_time.nc": (lambda p: _nc(p, time=np.array([f"t{i}" for i in range(40)])), "time holds text"),
+    "text_intensity.nc": (lambda p: _nc(p, intensity=np.array(["a"] * 40)), "intensity holds text"),
+    "complex.nc": (lambda p: _nc(p, intensity=X + 1j), "complex values"),
+    "no_time.nc": (lambda p: _nc(p, coords=False), "no variable 'time'"),
+    "furlongs.nc": (lambda p: _nc(p, time_attrs={"units": "furlongs"}), "time units 'furlongs'"),
+    "a_directory.csv": (lambda p: p.mkdir(), "is a directory"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_FILES))
+def test_a_file_that_is_not_a_series_is_one_line(name, tmp_path):
+    make, message = BAD_FILES[name]
+    path = tmp_path / name
+    make(path)
+    with pytest.raises(DataError, match=message) as err:
+        load_series(path)
+    assert "\n" not in str(err.value) and str(err.value).startswith("data: ")
+
+
+@pytest.mark.parametrize("path", sorted(CORPUS.glob("*_*.csv")), ids=lambda p: p.name)
+def test_the_csv_corpus(path):
+    """ok_*: a BOM, CRLF line ends and a quoted header, extra named columns read as they should;
+    bad_*: one line each."""
+    if path.name.startswith("ok_"):
+        s = load_series(path)
+        np.testing.assert_allclose(s.time, T)
+        np.testing.assert_allclose(s.intensity, X, atol=1e-6)
+        return
+    with pytest.raises(DataError) as err:
+        load_series(path)
+    assert "\n" not in str(err.value) and str(err.value).startswith("data: ")
+
+
+def test_csv_extra_cells_and_not_netcdf_files_are_named():
+    with pytest.raises(DataError, match=r"line 2: 3 cells; the header names 2 \(time,intensity\)"):
+        load_series(CORPUS / "bad_extra_cells.csv")
+    with pytest.raises(DataError, match="intensity has infinite values"):
+        load_series(CORPUS / "bad_inf.csv")
+    for name in ("random_bytes.nc", "text.nc"):
+        with pytest.raises(DataError, match=f"{name} is not a netCDF"):
+            load_series(CORPUS / name)
+
+
+def test_netcdf_cf_times_are_read_in_seconds(tmp_path):
+    """A CF time axis ("milliseconds since 2024-01-01") is converted to seconds from its epoch; a
+    plain numeric time (no units) is in seconds."""
+    ms = load_series(
+        _nc(tmp_path / "ms.nc", time=1000 * (T + 3.0), time_attrs={"units": "milliseconds since 2024-01-01"})
+    )
+    np.testing.assert_allclose(ms.time, T + 3.0)
+    s = load_series(_nc(tmp_path / "s.nc", time=T + 3.0, time_attrs={"units": "s"}))
+    np.testing.assert_allclose(s.time, T + 3.0)
+    h = load_series(_nc(tmp_path / "h.nc", time=T / 3600, time_attrs={"units": "hours"}))
+    np.testing.assert_allclose(h.time, T, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "x, message",
+    [
+        (np.ones(40), r"data: the intensity is constant \(all 40 valid samples are 1\); nothing to fit"),
+        (np.r_[np.full(39, 2.0), np.nan], "constant"),
+        (1.0 + 1e-17 * X, "constant"),  # differs only in rounding
+        (1e300 * X, r"data: intensity .*e\+299 at sample \d+ is outside the allowed range \[-1e\+100, 1e\+100\]"),
+        (1e-300 * X, r"varies by only .*; at least 1e-100 is needed"),
+        (X + 0.5j, "complex values"),
+        (np.array(["1.0"] * 40), "text"),
+        (X > 0, "booleans"),
+    ],
+)
+def test_values_that_cannot_be_fitted(x, message):
+    with pytest.raises(DataError, match=message) as err:
+        validate(T, x)
+    assert "\n" not in str(err.value)
+
+
+def test_a_time_axis_outside_float_range_is_refused():
+    with pytest.raises(DataError, match=r"time .* outside the allowed range"):
+        validate(1e300 + T * 1e290, X)
+
+
+@pytest.mark.parametrize("scene", ["roof_elastic", "roof_frame"])
+def test_fitting_a_constant_series_is_one_line(scene):
+    """Today's math domain error (plate scene) and garbage fit (frame scene) become one line."""
+    table = vi.load_scene(builtin_scene(scene), ["noise.sigma=0.6"])
+    t = np.arange(800) * 0.005
+    with pytest.raises(DataError, match="constant"):
+        vi.fit(vi.series(t, np.ones(t.size)), table, method="spectral")
+
+
+def test_real_data_scales_are_accepted():
+    """What a sensor gives: counts near 6e4 with a spread of a few counts, radiances near 1e-9,
+    time stamps in seconds of the epoch."""
+    rng = np.random.default_rng(0)
+    validate(T, 60000 + np.round(3 * rng.standard_normal(T.size)))
+    validate(T, 1e-9 * (1 + 1e-3 * X))
+    validate(1.7e9 + T, X)
+    validate(T, 1e90 * X)

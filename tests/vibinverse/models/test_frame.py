@@ -134,7 +134,7 @@ def test_compiled_drive_mean_equals_the_complex_exponential_on_a_long_series():
 
     problem = frame_problem(SNR10, "footprint.resolution=32")
     t = np.arange(200_000) * 0.005 + 3.0
-    like = FrameModel(problem.model.base, validate(t, np.zeros(t.size), "grid"))
+    like = FrameModel(problem.model.base, validate(t, np.sin(t), "grid"))
     assert like._grid is not None
     w = 2 * np.pi * np.array([10.0, 37.3, 98.0])
     qx, qy = np.array([1e-5 + 2e-5j, -3e-6j, 4e-6]), np.array([2e-6 - 1e-6j, 5e-6, 1e-6 + 1e-6j])

@@ -1,0 +1,2 @@
+time,intensity
+0,1
