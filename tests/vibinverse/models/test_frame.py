@@ -146,3 +146,22 @@ def test_compiled_drive_mean_equals_the_complex_exponential_on_a_long_series():
     assert np.abs(fast - slow).max() <= 4 * phase_rounding * np.ptp(slow)
     short = slice(0, 4000)  # where w t is small, the two agree to the level's ulps
     assert np.abs(fast[short] - slow[short]).max() <= 1e-10 * np.ptp(slow)
+
+
+def test_camera_stamps_with_nine_significant_digits_are_a_uniform_grid():
+    """Stamps printed with 9 significant digits (1e-8 s at 20 s) were refused as non-uniform."""
+    problem = frame_problem(SNR10)
+    s = problem.series
+    rounded = np.array([float(f"{v:.9g}") for v in s.time + 12.34567891])  # a clock started earlier
+    assert np.max(np.abs(rounded - 12.34567891 - s.time)) > 1e-6 * s.dt  # off the grid by up to 5e-8 s
+    ntsc = validate(np.array([float(f"{k / 29.97:.9g}") for k in range(3000)]), np.sin(np.arange(3000.0)), "ntsc")
+    assert ntsc.uniform
+    stamped = validate(rounded, s.intensity, "camera", s.scene)
+    assert stamped.uniform
+    values = problem.truth()
+    exact = build_model(problem.model.base, validate(s.time + 12.34567891, s.intensity, "x")).log_likelihood(values)
+    model = build_model(problem.model.base, stamped)
+    # the same likelihood to the stamps' rounding (a phase error of w * 5e-7 s on the 10 Hz drive)
+    assert model.log_likelihood({**values}) == pytest.approx(exact, abs=0.05)
+    jittered = validate(s.time + np.random.default_rng(0).uniform(-0.2, 0.2, s.time.size) * s.dt, s.intensity, "j")
+    assert not jittered.uniform
