@@ -6,10 +6,13 @@ cover the model or fails falls back to the derivative-free MAP."""
 from __future__ import annotations
 
 import logging
+import math
 from pathlib import Path
 
+from vibinverse.detection import DETECTION_GAIN
 from vibinverse.errors import InputError, NumericalError, Unsupported
 from vibinverse.estimators import CasadiMap, Emcee, ScipyMap, SindyEstimator, SpectralEstimator
+from vibinverse.estimators.base import base_result
 from vibinverse.io.series import check_resolves
 from vibinverse.posterior import Posterior
 from vibinverse.result import FitResult
@@ -17,6 +20,9 @@ from vibinverse.result import FitResult
 logger = logging.getLogger(__name__)
 
 METHODS = ("spectral", "sindy", "casadi", "map", "mcmc", "auto")
+# another reading of the spectrum closer than this in log posterior is reported as ambiguous (the
+# 5-sigma gain of the detection test: one reading is claimed only when the other is that far below)
+AMBIGUITY_MARGIN = DETECTION_GAIN
 
 
 def check_priors(posterior: Posterior) -> None:
@@ -92,7 +98,7 @@ def map_stage(posterior: Posterior, start: FitResult, method: str, seed: int) ->
     "map" (derivative-free scipy), which is also the fallback when casadi does not cover the model
     or fails. When the model changes its evaluation at the optimum (`SignalModel.refine`), the MAP
     runs again from there."""
-    result = _map(posterior, start, method, seed)
+    result = _alternatives(posterior, _map(posterior, start, method, seed), method, seed)
     facts, message = posterior.model.refine(result.point)
     if message:
         logger.info("%s", message)
@@ -104,6 +110,50 @@ def map_stage(posterior: Posterior, start: FitResult, method: str, seed: int) ->
     if facts:
         result.data["model"] = {**result.data.get("model", {}), **posterior.model.describe(), **facts}
     return result
+
+
+def _alternatives(posterior: Posterior, best: FitResult, method: str, seed: int) -> FitResult:
+    """The MAP from each other reading of the spectrum the model knows (`SignalModel.alternatives`);
+    the best posterior wins, and a reading that is not AMBIGUITY_MARGIN below it is reported in
+    `diagnostics["ambiguous"]` instead of being dropped in silence."""
+    space = posterior.space
+    runs = []
+    for what, values in posterior.model.alternatives(best.point, space.names):
+        start = {n: p.inside(values.get(n, best.point[n])) for n, p in zip(space.names, space.priors)}
+        runs.append((what, _map(posterior, base_result(posterior, "start", start, starts=[start]), method, seed)))
+    if not runs:
+        return best
+    timing = {k: sum(r.timing.get(k, 0.0) for r in [best, *(r for _, r in runs)]) for k in best.timing}
+    chosen = max([("the first reading", best), *runs], key=lambda wr: _finite(wr[1].log_post))
+    winner = chosen[1]
+    ambiguous = []
+    for what, other in [("the first reading", best), *runs]:
+        if other is winner or _same(other.point, winner.point):
+            continue
+        gap = _finite(winner.log_post) - _finite(other.log_post)
+        if gap < AMBIGUITY_MARGIN:
+            ambiguous.append(
+                {
+                    "alternative": what if other is not best else "the reading the MAP found first",
+                    "delta_log_posterior": float(gap),
+                    "values": {n: other.point[n] for n in space.names if n.split("[")[0].endswith("frequency")},
+                }
+            )
+    if chosen[0] != "the first reading":
+        logger.info("the MAP moved to another reading of the spectrum: %s", chosen[0])
+    winner.timing = timing
+    winner.diagnostics["ambiguous"] = ambiguous
+    return winner
+
+
+def _same(a: dict[str, float], b: dict[str, float]) -> bool:
+    """Two optima are one reading when every frequency agrees to 1e-3."""
+    names = [n for n in a if n.split("[")[0].endswith("frequency")]
+    return all(abs(a[n] - b[n]) <= 1e-3 * max(abs(b[n]), 1e-12) for n in names)
+
+
+def _finite(v: float | None) -> float:
+    return v if v is not None and math.isfinite(v) else -math.inf
 
 
 def _map(posterior: Posterior, start: FitResult, method: str, seed: int) -> FitResult:

@@ -73,6 +73,16 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
             f"{n} is multimodal: groups of walkers settled in separate modes. The summary mixes them; "
             "look at the corner plot and consider a narrower prior or a model with the other mode fixed."
         )
+    ambiguous = d.get("ambiguous")
+    for alt in ambiguous if isinstance(ambiguous, list) else []:
+        if not isinstance(alt, dict):
+            continue
+        where = ", ".join(f"{k} = {_fmt(v, '.5g')}" for k, v in (alt.get("values") or {}).items())
+        out.append(
+            f"The data cannot tell this fit from another reading ({alt.get('alternative')}: {where}), only "
+            f"{_fmt(alt.get('delta_log_posterior'), '.1f')} below in log posterior (5 sigma would be 12.5). "
+            "Which line is which is not decided by these data: a longer record or a prior on the resonance decides."
+        )
     for det in detections(d):
         if not det.detected:
             out.append(

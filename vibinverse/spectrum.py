@@ -54,24 +54,28 @@ def _refine(freqs: np.ndarray, power: np.ndarray, i: int) -> float:
 def line_candidates(series: Series, band: tuple[float, float], n_candidates: int = 3) -> list[float]:
     """Periodogram peaks in `band` (at least 0.3 Hz apart), most steady first: a drive is the same
     sinusoid in each quarter of the record, while a noise-driven resonance's phase wanders over its
-    coherence time 1/(zeta omega). Steadiness ranks; the MAP fit decides between the candidates."""
-    freqs, power = periodogram(series)
-    sel = (freqs >= band[0]) & (freqs <= band[1])
-    if not sel.any():
-        return []
-    idx = np.flatnonzero(sel)
-    order = idx[np.argsort(power[idx])[::-1]]
-    picked: list[int] = []
-    for i in order:
-        if all(abs(freqs[i] - freqs[j]) > 0.3 for j in picked):
-            picked.append(int(i))
-        if len(picked) == n_candidates:
-            break
+    coherence time 1/(zeta omega). Steadiness ranks; the MAP fit decides between the candidates.
+
+    Each peak is taken from the periodogram of what the peaks before it leave (their sinusoids
+    subtracted): a strong, lightly damped resonance's window sidelobes would otherwise hide a weak
+    line far from it."""
     t, y = series.time, series.intensity
+    resid = y - np.nanmean(y)
+    picked: list[float] = []
+    for _ in range(n_candidates):
+        freqs, power = periodogram(Series(t, resid, series.source))
+        sel = (freqs >= band[0]) & (freqs <= band[1])
+        for f in picked:
+            sel &= np.abs(freqs - f) > 0.3
+        if not sel.any():
+            break
+        idx = np.flatnonzero(sel)
+        f = _refine(freqs, power, int(idx[np.argmax(power[idx])]))
+        picked.append(f)
+        resid = resid - sinusoid(t, resid, f)[2]
     quarter = np.minimum((4 * (t - t[0]) / (t[-1] - t[0] + series.dt)).astype(int), 3)
     scored = []
-    for i in picked:
-        f = _refine(freqs, power, i)
+    for f in picked:
         z = np.array(
             [a * np.exp(1j * p) for a, p, _ in (sinusoid(t[quarter == j], y[quarter == j], f) for j in range(4))]
         )

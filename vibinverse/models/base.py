@@ -106,6 +106,12 @@ class SignalModel(ABC):
                     f"fit: {name} cannot be fitted (yet); free parameters of this scene: {', '.join(sorted(fittable))}"
                 )
 
+    def alternatives(self, values: dict[str, float], free: list[str]) -> list[tuple[str, dict[str, float]]]:
+        """Other readings of the same spectrum the fit at `values` may have missed, each (what it
+        changes, starting values): the pipeline runs the MAP from each, keeps the best, and reports
+        a reading it cannot rule out (`vibinverse.pipeline.map_stage`)."""
+        return []
+
     def phase_period(self, name: str) -> float:
         """The period of a phase parameter as the data see it."""
         return 2 * math.pi

@@ -356,6 +356,18 @@ class FrameModel(SignalModel):
 
         return CasadiFrameObjective(posterior)
 
+    def alternatives(self, values: dict[str, float], free: list[str]) -> list[tuple[str, dict[str, float]]]:
+        """The tilt resonance and the first drive line exchanged: a very lightly damped resonance is
+        as steady as a drive over a short record, so the spectrum alone cannot tell them apart."""
+        k = self.key
+        names = (k + "tilt_frequency", k + "drive_frequency")
+        if not all(n in free for n in names) or not self.n_lines:
+            return []
+        f_tilt, f_drive = values[names[0]], values[names[1]]
+        swapped = {**values, **self.calibrated_guess(f_tilt, (f_drive, values.get(k + "tilt_damping_ratio", 0.01)))}
+        swapped[names[0]], swapped[names[1]] = f_drive, f_tilt
+        return [("the tilt resonance and the drive line exchanged", swapped)]
+
     def calibrated_guess(self, drive_frequency: float | None, resonance: tuple[float, float]) -> dict[str, float]:
         """Spectral values of the drive and noise levels given the resonance (frequency, damping
         ratio), calibrated through the forward model (`frame_spectral.frame_guess`)."""
