@@ -1,5 +1,9 @@
 import sys
 
-from vibinverse.cli import main
+try:
+    from vibinverse.cli import entry
+except KeyboardInterrupt:  # Ctrl-C while the interpreter starts: one line, no traceback
+    print("vibinverse: interrupted", file=sys.stderr)
+    sys.exit(130)
 
-sys.exit(main())
+entry()

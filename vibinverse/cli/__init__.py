@@ -91,6 +91,19 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def entry() -> None:
+    """The console script and `python -m vibinverse`: exit with `main`'s code. An interruption ends
+    the process at once: when Ctrl-C lands inside an import, CPython marks it unhandled even though
+    `main` handled it, and re-raises SIGINT at exit (status -2 instead of 130). Outputs are written
+    atomically and the checkpoint after every step, so nothing is left to flush but the streams."""
+    code = main()
+    if code in SIGNAL_EXIT.values():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 def _main_thread() -> bool:
     import threading
 
@@ -98,4 +111,4 @@ def _main_thread() -> bool:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

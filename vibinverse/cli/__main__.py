@@ -1,5 +1,3 @@
-import sys
+from vibinverse.cli import entry
 
-from vibinverse.cli import main
-
-sys.exit(main())
+entry()

@@ -340,3 +340,35 @@ def test_quiet_and_verbose_before_or_after_the_verb(tmp_path):
         assert r.returncode == 0 and r.stdout == "" and out.exists(), r.stderr
     r = run_cli("simulate", ROOF, *FAST, "-o", str(out))
     assert "sensitivity S =" in r.stdout
+
+
+@pytest.mark.slow
+def test_ctrl_c_at_any_moment_of_a_run_is_one_line_and_exit_130(tmp_path):
+    """Ctrl-C while the interpreter imports, while the parser loads, while the fit runs."""
+    import signal
+    import time
+
+    assert run_cli("simulate", ROOF, *FAST, "--seed", "1", "-o", str(tmp_path / "d.csv")).returncode == 0
+    for delay in (0.4, 0.8, 1.5, 2.5):  # (earlier, CPython itself is still starting: not ours to catch)
+        args = [
+            "fit",
+            str(tmp_path / "d.csv"),
+            "--scene",
+            ROOF,
+            "--method",
+            "map",
+            "-o",
+            str(tmp_path / "r.nc"),
+            "--summary",
+            str(tmp_path / "r.json"),
+        ]
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "vibinverse", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+        assert "Traceback" not in err, (delay, err)
+        if proc.returncode != 0:  # (a run that finished before the signal came is fine)
+            assert proc.returncode == 130 and len(err.strip().splitlines()) == 1, (delay, proc.returncode, err)
+            assert not (tmp_path / "r.nc").exists()
