@@ -6,6 +6,7 @@ angles in rad, frequencies in Hz. The README documents the schema.
 
 from __future__ import annotations
 
+import codecs
 import copy
 import math
 import tomllib
@@ -16,53 +17,87 @@ from forward.errors import SceneError
 from forward.materials import Fresnel, material_from_spec
 from forward.motion import MOTION_KINDS
 from forward.polarizer import Polarizer
-from forward.scene import Footprint, Noise, Sampling, Scene, Sensor, Sun, Surface
-from forward.validation import Table
+from forward.scene import Footprint, Load, Noise, Sampling, Scene, Sensor, Sun, Surface, estimate_memory
+from forward.validation import MAX_DEPTH, Table, check_depth, one_line
 
 MAX_SAMPLES = 100_000_000
+MAX_FILE_BYTES = 16 * 2**20  # a scene file holds settings, not data; this also bounds reading a device or pipe
 _INCLINATION = {"lo": 0.0, "hi": math.pi / 2, "lo_open": True}
 _POSITIVE = {"lo": 0.0, "lo_open": True}
 
 
 def read_table(path: str | Path) -> dict[str, Any]:
-    """The raw TOML table of a scene file."""
+    """The raw TOML table of a scene file (UTF-8, a byte-order mark allowed, at most MAX_FILE_BYTES,
+    tables and arrays nested at most MAX_DEPTH levels)."""
     p = Path(path)
+    name = one_line(p, 300)
     try:
         with p.open("rb") as fh:
-            return tomllib.load(fh)
+            data = fh.read(MAX_FILE_BYTES + 1)
     except FileNotFoundError:
-        raise SceneError(f"scene: file not found: {p}") from None
+        raise SceneError(f"scene: file not found: {name}") from None
     except IsADirectoryError:
-        raise SceneError(f"scene: {p} is a directory, not a scene file") from None
+        raise SceneError(f"scene: {name} is a directory, not a scene file") from None
+    except OSError as exc:
+        raise SceneError(f"scene: cannot read {name}: {one_line(exc.strerror or exc)}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise SceneError(f"scene: {name} is larger than 16 MiB; allowed at most 16 MiB (a scene file holds settings)")
+    if data.startswith(codecs.BOM_UTF8):
+        data = data[len(codecs.BOM_UTF8) :]
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(
+            f"scene: {name} is not a UTF-8 TOML file (byte {exc.start} is {data[exc.start]:#04x}; a binary file?)"
+        ) from None
+    if "\x00" in text:
+        raise SceneError(f"scene: {name} is not a UTF-8 TOML file (byte {data.index(0)} is 0x00; a binary file?)")
+    if not text.strip():
+        raise SceneError(f"scene: {name} is empty; a scene needs at least [sun], [sensor], [sampling] and [footprint]")
+    try:
+        table = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"scene: {p} is not valid TOML: {exc}") from None
+        raise SceneError(f"scene: {name} is not valid TOML: {one_line(exc, 200)}") from None
+    except RecursionError:  # tomllib recurses once per level of arrays and inline tables
+        raise SceneError(
+            f"scene: {name}: nesting deeper than {MAX_DEPTH} levels of tables and arrays; allowed at most {MAX_DEPTH}"
+        ) from None
+    check_depth(table)
+    return table
 
 
 def apply_overrides(table: dict[str, Any], overrides: list[str] | tuple[str, ...]) -> dict[str, Any]:
     """A copy of `table` with each "dotted.key=value" applied; value is read as TOML (a bare word is a string)."""
+    check_depth(table)  # before the deep copy, which recurses
     out = copy.deepcopy(table)
     for item in overrides:
         key, sep, text = item.partition("=")
         key = key.strip()
         if not sep or not key or any(not part for part in key.split(".")):
-            raise SceneError(f"--set: expected dotted.key=value, got {item!r}")
-        value = parse_value(text.strip())
+            raise SceneError(f"--set: expected dotted.key=value, got {one_line(repr(item))}")
+        value = parse_value(text.strip(), key)
         node = out
         parts = key.split(".")
         for part in parts[:-1]:
             node = node.setdefault(part, {})
             if not isinstance(node, dict):
-                raise SceneError(f"--set {key}: {part} is a value, not a table")
+                raise SceneError(f"--set {one_line(key)}: {one_line(part)} is a value, not a table")
         node[parts[-1]] = value
+    check_depth(out)
     return out
 
 
-def parse_value(text: str) -> Any:
+def parse_value(text: str, key: str = "value") -> Any:
     """A TOML value ("1e-3", "[0, 25]", "true", "'p'"), else the text itself as a string."""
     try:
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text
+    except RecursionError:  # tomllib recurses once per level of arrays and inline tables
+        raise SceneError(
+            f"--set {one_line(key)}: nesting deeper than {MAX_DEPTH} levels of tables and arrays; "
+            f"allowed at most {MAX_DEPTH}"
+        ) from None
 
 
 def load_scene(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> tuple[Scene, dict[str, Any]]:
@@ -72,7 +107,12 @@ def load_scene(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) ->
 
 
 def scene_from_table(data: dict[str, Any]) -> Scene:
-    """Validate a scene table into a `Scene`; a SceneError names the first bad key."""
+    """Validate a scene table into a `Scene`; a SceneError names the first bad key.
+
+    The scene's memory estimate (`forward.scene.estimate_memory`) is checked from the sizes of its
+    lists before any motion is built, so that 300 000 drive lines are refused at once; `observe`
+    checks the simulation's own estimate (per-run motions, the dense path) before it allocates."""
+    check_depth(data)
     top = Table(data, "")
     top.raw("title", "")
     top.raw("infer", None)  # read by `vibinverse fit` (free parameters and priors)
@@ -81,6 +121,8 @@ def scene_from_table(data: dict[str, Any]) -> Scene:
     sampling = _sampling(top.table("sampling"))
     noise = _noise(top.table("noise", required=False))
     footprint = _footprint(top.table("footprint"))
+    loads = _raw_loads(data.get("surfaces"))
+    estimate_memory(sampling.n_samples, footprint.resolution**2, loads.values()).check()
     background = _surface(
         top.table("background", required=False) or Table({}, "background"),
         "background",
@@ -102,6 +144,22 @@ def scene_from_table(data: dict[str, Any]) -> Scene:
                 f"the Nyquist frequency {sampling.fs / 2:g} Hz; allowed range (0, fs/2)"
             )
     return Scene(sun, sensor, footprint, tuple(surfaces), background, sampling, noise)
+
+
+def _raw_loads(surfaces: object) -> dict[str, Load]:
+    """Each moving surface's load from the raw table, before its motion is built: the number of
+    lines is the length of the longest flat list in its motion table (e.g. drive_frequency)."""
+    loads = {}
+    for name, spec in surfaces.items() if isinstance(surfaces, dict) else ():
+        motion = spec.get("motion") if isinstance(spec, dict) else None
+        if not isinstance(motion, dict):
+            continue
+        lines, key = 1, f"surfaces.{name}.motion"
+        for k, v in motion.items():
+            if isinstance(v, list) and len(v) > lines and not isinstance(v[0], (list, dict)):
+                lines, key = len(v), f"surfaces.{name}.motion.{k}"
+        loads[str(name)] = Load(str(name), lines, one_line(key))
+    return loads
 
 
 def _sun(t: Table) -> Sun:
@@ -139,8 +197,12 @@ def _sensor(t: Table) -> Sensor:
 
 def _sampling(t: Table) -> Sampling:
     s = Sampling(t.number("fs", **_POSITIVE), t.number("duration", **_POSITIVE), t.number("start", 0.0))
-    if not 2 <= s.n_samples <= MAX_SAMPLES:
-        raise SceneError(f"sampling: duration * fs = {s.n_samples} samples; allowed range [2, {MAX_SAMPLES}]")
+    n = s.duration * s.fs
+    if not (math.isfinite(n) and 2 <= s.n_samples <= MAX_SAMPLES):
+        raise SceneError(
+            f"sampling: duration * fs = {s.n_samples if math.isfinite(n) else n} samples; "
+            f"allowed range [2, {MAX_SAMPLES}]"
+        )
     t.done()
     return s
 

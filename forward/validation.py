@@ -3,8 +3,57 @@
 from __future__ import annotations
 
 import math
+import numbers
 
 from forward.errors import SceneError
+
+MAX_DEPTH = 32  # levels of tables and arrays in a scene; the examples use 6
+MAX_EXPRESSION_LENGTH = 200  # characters of one numeric expression
+SEED_RANGE = "[0, 2^32)"
+
+
+def one_line(text: object, limit: int = 120) -> str:
+    """`text` for an error message: on one line (characters that are not printable, line breaks
+    among them, are escaped) and at most about `limit` characters."""
+    s = str(text)
+    if len(s) > limit:
+        s = s[: limit - 3] + "..."
+    if s.isprintable():
+        return s
+    return "".join(c if c.isprintable() else c.encode("unicode_escape", "backslashreplace").decode("ascii") for c in s)
+
+
+def check_depth(value: object, key: str = "") -> None:
+    """SceneError when tables (dicts) and arrays (lists) nest deeper than MAX_DEPTH levels, the
+    table itself being level 1. Iterative, so that neither a deep nor a cyclic table can exhaust
+    the interpreter's recursion limit here or in the code that walks the table later."""
+    stack = [(value, key, 1)]
+    while stack:
+        node, path, depth = stack.pop()
+        if isinstance(node, dict):
+            items = ((f"{path}.{k}" if path else str(k), v) for k, v in node.items())
+        elif isinstance(node, list):
+            items = ((f"{path}[{i}]", v) for i, v in enumerate(node))
+        else:
+            continue
+        if depth > MAX_DEPTH:
+            raise SceneError(
+                f"{one_line(path or 'scene')}: nesting deeper than {MAX_DEPTH} levels of tables and arrays; "
+                f"allowed at most {MAX_DEPTH}"
+            )
+        stack.extend((v, p, depth + 1) for p, v in items if isinstance(v, (dict, list)))
+
+
+def seed(value: object, key: str = "seed") -> int | None:
+    """A random seed: None or an integer in [0, 2^32), else SceneError."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise SceneError(f"{key}: must be an integer in the allowed range {SEED_RANGE}, got {one_line(repr(value))}")
+    v = int(value)
+    if not 0 <= v < 2**32:
+        raise SceneError(f"{key}: {v} is outside the allowed range {SEED_RANGE}")
+    return v
 
 
 def number(
@@ -12,7 +61,7 @@ def number(
 ) -> float:
     """`value` as a finite float in the interval [lo, hi] (ends open when asked), else SceneError."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise SceneError(f"{key}: must be a finite number, got {value!r}")
+        raise SceneError(f"{key}: must be a finite number, got {one_line(repr(value))}")
     v = float(value)
     below = v <= lo if lo_open else v < lo
     above = v >= hi if hi_open else v > hi
@@ -24,7 +73,7 @@ def number(
 def integer(value: object, key: str, lo: int, hi: int) -> int:
     """`value` as an int in [lo, hi], else SceneError."""
     if isinstance(value, bool) or not isinstance(value, int):
-        raise SceneError(f"{key}: must be an integer, got {value!r}")
+        raise SceneError(f"{key}: must be an integer, got {one_line(repr(value))}")
     if not lo <= value <= hi:
         raise SceneError(f"{key}: {value} is outside the allowed range [{lo}, {hi}]")
     return value
@@ -62,9 +111,20 @@ _CONSTANTS = {"pi": math.pi, "e": math.e}
 def expression(text: str, key: str) -> float:
     """Evaluate a numeric expression such as "pi/3 + 0.015" or "arctan(1.5)" (no names but
     pi, e and the functions sqrt, sin, cos, tan, arcsin, arccos, arctan, atan2, radians, exp, log,
-    log10)."""
+    log10) to a finite float.
+
+    At most MAX_EXPRESSION_LENGTH characters (surrounding blanks aside), which bounds the parse and
+    the evaluation: every constant is read as a float, so each operation, a power with a huge
+    exponent included, costs O(1) and overflows (an error) instead of growing.
+    """
     import ast
     import operator
+
+    text = text.strip()
+    if len(text) > MAX_EXPRESSION_LENGTH:
+        raise SceneError(
+            f"{key}: an expression of {len(text)} characters; allowed at most {MAX_EXPRESSION_LENGTH} characters"
+        )
 
     ops = {
         ast.Add: operator.add,
@@ -95,9 +155,18 @@ def expression(text: str, key: str) -> float:
         raise ValueError
 
     try:
-        return float(ev(ast.parse(text.strip(), mode="eval").body))
-    except (SyntaxError, ValueError, TypeError, ZeroDivisionError, OverflowError, RecursionError):
-        raise SceneError(f"{key}: {text!r} is not a number or a numeric expression (pi, sqrt, arctan, ...)") from None
+        value = float(ev(ast.parse(text, mode="eval").body))
+    except OverflowError:
+        raise SceneError(
+            f"{key}: {one_line(repr(text))} overflows float64 (|x| > 1.8e308); allowed: a finite number"
+        ) from None
+    except (SyntaxError, ValueError, TypeError, ZeroDivisionError, RecursionError, MemoryError):
+        raise SceneError(
+            f"{key}: {one_line(repr(text))} is not a number or a numeric expression (pi, sqrt, arctan, ...)"
+        ) from None
+    if not math.isfinite(value):
+        raise SceneError(f"{key}: {one_line(repr(text))} evaluates to {value}; allowed: a finite number")
+    return value
 
 
 _REQUIRED = object()
@@ -108,11 +177,11 @@ class Table:
 
     def __init__(self, data: object, key: str):
         if not isinstance(data, dict):
-            raise SceneError(f"{key}: must be a table, got {data!r}")
+            raise SceneError(f"{key}: must be a table, got {one_line(repr(data))}")
         self.data, self.key, self.seen = data, key, set()
 
     def path(self, name: str) -> str:
-        return f"{self.key}.{name}" if self.key else name
+        return one_line(f"{self.key}.{name}" if self.key else name)
 
     def has(self, name: str) -> bool:
         return name in self.data
@@ -152,7 +221,7 @@ class Table:
     def choice(self, name: str, default: object, allowed: tuple[str, ...]) -> str:
         value = self.raw(name, default)
         if value not in allowed:
-            raise SceneError(f"{self.path(name)}: {value!r} is not one of {', '.join(allowed)}")
+            raise SceneError(f"{self.path(name)}: {one_line(repr(value))} is not one of {', '.join(allowed)}")
         return value
 
     def interval(self, name: str) -> tuple[float, float]:
@@ -160,7 +229,7 @@ class Table:
         value = self.raw(name)
         key = self.path(name)
         if not (isinstance(value, list) and len(value) == 2):
-            raise SceneError(f"{key}: must be [min, max] in m, got {value!r}")
+            raise SceneError(f"{key}: must be [min, max] in m, got {one_line(repr(value))}")
         lo, hi = (expression(v, key) if isinstance(v, str) else number(v, key) for v in value)
         if not hi > lo:
             raise SceneError(f"{key}: [{lo:g}, {hi:g}] has size {hi - lo:g}; the allowed range is size > 0 (min < max)")

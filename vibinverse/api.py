@@ -33,6 +33,10 @@ SeriesLike = str | Path | Series
 
 def _table(scene: SceneLike, overrides: Sequence[str] = ()) -> dict[str, Any]:
     if isinstance(scene, Mapping):
+        from forward.validation import check_depth
+
+        with scene_errors():
+            check_depth(dict(scene), "scene")  # before copying: a deep or cyclic table would recurse
         if overrides:
             from forward.scene_file import apply_overrides
 

@@ -1,9 +1,12 @@
+import copy
 import math
+import time
+from pathlib import Path
 
 import pytest
 
 from forward.errors import SceneError
-from forward.scene_file import apply_overrides, load_scene, parse_value
+from forward.scene_file import apply_overrides, load_scene, parse_value, scene_from_table
 from forward.validation import expression
 from tests.conftest import SCENES
 
@@ -58,3 +61,239 @@ def test_missing_and_malformed_files(tmp_path):
     bad.write_text("[sun\n")
     with pytest.raises(SceneError, match="not valid TOML"):
         load_scene(bad)
+
+
+# ------------------------------------------------------------------ files and values that are not a scene
+
+CORPUS = Path(__file__).resolve().parents[1] / "corpus" / "scenes"
+
+
+def _one_line(err: pytest.ExceptionInfo) -> str:
+    message = str(err.value)
+    assert message and "\n" not in message and "\r" not in message and len(message) < 500, message
+    return message
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        b"\xff\xfe\x00garbage",
+        b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x00\x10" + bytes(range(256)),
+        "title = 'caf\xe9'\n".encode("latin-1"),
+        b"\x00" * 64,
+    ],
+    ids=["utf16-bom-garbage", "png", "latin-1", "nul-bytes"],
+)
+def test_binary_and_non_utf8_files_are_refused_in_one_line(tmp_path, data):
+    p = tmp_path / "scene.toml"
+    p.write_bytes(data)
+    with pytest.raises(SceneError, match="not a UTF-8 TOML file") as err:
+        load_scene(p)
+    assert str(p) in _one_line(err)
+
+
+def test_empty_files_directories_and_missing_files(tmp_path):
+    for text in ("", "  \n\n\t\n"):
+        (tmp_path / "empty.toml").write_text(text)
+        with pytest.raises(SceneError, match=r"empty\.toml is empty") as err:
+            load_scene(tmp_path / "empty.toml")
+        _one_line(err)
+    with pytest.raises(SceneError, match="is a directory") as err:
+        load_scene(tmp_path)
+    _one_line(err)
+    with pytest.raises(SceneError, match="file not found") as err:
+        load_scene(tmp_path / "nope.toml")
+    _one_line(err)
+
+
+def test_a_utf8_byte_order_mark_is_accepted(tmp_path):
+    p = tmp_path / "bom.toml"
+    p.write_bytes(b"\xef\xbb\xbf" + (SCENES / "roof_frame.toml").read_bytes())
+    assert load_scene(p)[1] == load_scene(SCENES / "roof_frame.toml")[1]
+
+
+def test_an_oversized_file_is_refused_before_parsing(tmp_path):
+    p = tmp_path / "big.toml"
+    p.write_bytes(b"# " + b"x" * (16 * 2**20 + 10) + b"\n")
+    with pytest.raises(SceneError, match=r"allowed at most 16 MiB") as err:
+        load_scene(p)
+    _one_line(err)
+
+
+@pytest.mark.parametrize("path", sorted(CORPUS.glob("*.toml")), ids=lambda p: p.stem)
+def test_corpus_of_bad_scene_files(path):
+    """Each file's first line says what the one-line error must match: '# expect: REGEX'."""
+    expect = path.read_text().splitlines()[0].removeprefix("# expect: ")
+    t0 = time.perf_counter()
+    with pytest.raises(SceneError, match=expect) as err:
+        load_scene(path)
+    assert time.perf_counter() - t0 < 1.0
+    _one_line(err)
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("title=" + "[" * 5000 + "]" * 5000, "nesting deeper than 32"),
+        ("title=" + "{a=" * 2000 + "1" + "}" * 2000, "nesting deeper than 32"),
+        ("title=" + "[" * 300 + "]" * 300, r"title\[0\]\[0\].*: nesting deeper than 32"),
+        ("a" + ".b" * 5000 + "=1", "nesting deeper than 32"),
+    ],
+    ids=["arrays", "inline-tables", "arrays-300", "dotted-key"],
+)
+def test_deep_nesting_in_overrides(override, message):
+    with pytest.raises(SceneError, match=message) as err:
+        load_scene(SCENES / "roof_frame.toml", [override])
+    _one_line(err)
+
+
+def test_deep_and_cyclic_tables_from_python():
+    _, table = load_scene(SCENES / "roof_frame.toml")
+    deep = copy.deepcopy(table)
+    node = deep["surfaces"]["roof"]
+    for _ in range(3000):  # deeper than the interpreter's recursion limit
+        node["x"] = {}
+        node = node["x"]
+    with pytest.raises(SceneError, match=r"surfaces.roof.x.x.x.*nesting deeper than 32") as err:
+        scene_from_table(deep)
+    _one_line(err)
+    with pytest.raises(SceneError, match="nesting deeper than 32"):
+        apply_overrides(deep, ["noise.sigma=1"])
+    cyclic = copy.deepcopy(table)
+    cyclic["infer"] = {"free": {}}
+    cyclic["infer"]["free"]["loop"] = cyclic
+    with pytest.raises(SceneError, match=r"infer\.free\.loop.*nesting deeper than 32") as err:
+        scene_from_table(cyclic)
+    _one_line(err)
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("1+" * 200_000 + "1", "k: an expression of 400001 characters; allowed at most 200"),
+        ("-" * 100_000 + "1", "allowed at most 200"),
+        ("9**9**9**9", "k: '9\\*\\*9\\*\\*9\\*\\*9' overflows"),
+        ("10**400", "overflows"),
+        ("exp(1000)", "overflows"),
+        ("1e308*10", r"k: '1e308\*10' evaluates to inf; allowed: a finite number"),
+        ("1e400 - 1e400", "evaluates to nan; allowed: a finite number"),
+        ("2 ** 1e308", "overflows"),
+    ],
+)
+def test_expressions_are_bounded_and_finite(text, message):
+    t0 = time.perf_counter()
+    with pytest.raises(SceneError, match=message) as err:
+        expression(text, "k")
+    assert time.perf_counter() - t0 < 1.0
+    _one_line(err)
+
+
+def test_expressions_within_the_bounds_still_work():
+    assert expression("2 ** -2000", "k") == 0.0  # underflow to 0 is a finite number
+    assert expression("-" * 150 + "1", "k") == 1.0
+    assert expression("(" * 50 + "1" + ")" * 50, "k") == 1.0
+    assert expression(" " * 300 + "1.5" + " " * 300, "k") == 1.5  # the limit counts the expression, not its padding
+
+
+def test_non_finite_expressions_are_refused_in_intervals():
+    with pytest.raises(SceneError, match=r"footprint.x: .*evaluates to -inf") as err:
+        load_scene(SCENES / "roof_frame.toml", ["footprint.x=['-1e308*10', 25]"])
+    _one_line(err)
+
+
+# ------------------------------------------------------------------ work and memory, refused before allocation
+
+
+def _lines_table(n: int) -> dict:
+    _, table = load_scene(SCENES / "roof_frame.toml")
+    motion = table["surfaces"]["roof"]["motion"]
+    motion["drive_frequency"] = [10.0] * n
+    motion["drive_amplitude"] = [1e-9] * n
+    return table
+
+
+def test_many_drive_lines_are_refused_fast_naming_the_estimate_and_the_limit():
+    table = _lines_table(300_000)
+    t0 = time.perf_counter()
+    with pytest.raises(SceneError) as err:
+        scene_from_table(table)
+    assert time.perf_counter() - t0 < 1.0
+    message = _one_line(err)
+    for part in (
+        "4000 samples x 300000 lines",
+        "limit 2 GiB",
+        "VIBINVERSE_MEMORY_LIMIT",
+        "surfaces.roof.motion.drive_frequency",
+        "sampling.duration",
+    ):
+        assert part in message, message
+
+
+def test_many_samples_at_high_resolution_are_refused_fast():
+    t0 = time.perf_counter()
+    with pytest.raises(SceneError) as err:
+        load_scene(
+            SCENES / "roof_elastic.toml", ["sampling.fs=1000", "sampling.duration=1e5", "footprint.resolution=4096"]
+        )
+    assert time.perf_counter() - t0 < 1.0
+    message = _one_line(err)
+    for part in ("100000000 samples", "16777216 subpixels", "limit 2 GiB", "sampling.duration", "footprint.resolution"):
+        assert part in message, message
+
+
+def test_the_memory_limit_can_be_raised_or_lowered(monkeypatch):
+    table = _lines_table(2000)  # 4000 samples x 2000 lines: 64 MB
+    scene_from_table(table)
+    monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", "50e6")
+    with pytest.raises(SceneError, match=r"limit 50 MB \(VIBINVERSE_MEMORY_LIMIT"):
+        scene_from_table(table)
+    monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", str(1 << 40))
+    scene_from_table(_lines_table(30_000))
+    for bad in ("lots", "-1", "0", "nan", "inf"):
+        monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", bad)
+        with pytest.raises(SceneError, match=r"VIBINVERSE_MEMORY_LIMIT: .*allowed range") as err:
+            scene_from_table(table)
+        _one_line(err)
+
+
+@pytest.mark.parametrize("name", ["roof_elastic", "glass_brewster", "roof_frame", "ground_rayleigh"])
+def test_every_example_scene_is_well_within_the_default_limit(name):
+    from forward.scene import memory_estimate, memory_limit
+
+    scene, _ = load_scene(SCENES / f"{name}.toml")
+    assert memory_estimate(scene).total < memory_limit() / 10
+
+
+def test_a_sample_count_beyond_float64_is_refused():
+    with pytest.raises(
+        SceneError, match=r"sampling: duration \* fs = inf samples; allowed range \[2, 100000000\]"
+    ) as err:
+        load_scene(SCENES / "roof_frame.toml", ["sampling.fs=1e300", "sampling.duration=1e300"])
+    _one_line(err)
+
+
+def test_an_endless_file_is_refused_without_reading_it_all():
+    if not Path("/dev/zero").exists():
+        pytest.skip("no /dev/zero")
+    t0 = time.perf_counter()
+    with pytest.raises(SceneError, match="allowed at most 16 MiB") as err:
+        load_scene("/dev/zero")
+    assert time.perf_counter() - t0 < 1.0
+    _one_line(err)
+
+
+def test_messages_stay_one_line_whatever_the_keys_and_values_hold(tmp_path):
+    p = tmp_path / "keys.toml"
+    p.write_text('"a\\nb\\u2028c" = 1\n' + (SCENES / "roof_frame.toml").read_text())
+    with pytest.raises(SceneError, match=r"a\\nb\\u2028c: unknown key") as err:
+        load_scene(p)
+    _one_line(err)
+    with pytest.raises(SceneError, match=r"sun\.azimuth: must be a finite number") as err:
+        load_scene(SCENES / "roof_frame.toml", ["sun.azimuth=[" + ",".join(["1"] * 100_000) + "]"])
+    assert len(_one_line(err)) < 200
+    with pytest.raises(SceneError, match=r"^sun\\ninclination: unknown key") as err:
+        load_scene(SCENES / "roof_frame.toml", ["sun\ninclination.x=1"])
+    _one_line(err)
+    with pytest.raises(SceneError, match=r"--set title.x\\ny: title is a value") as err:
+        load_scene(SCENES / "roof_frame.toml", ["title.x\ny=1"])
+    _one_line(err)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 from pathlib import Path
 from typing import Any
@@ -14,20 +15,49 @@ from forward.sensor import Observation
 def write_series_csv(path: Path, obs: Observation, table: dict[str, Any], seed: int | None, version: str) -> None:
     """CSV with '#' comment lines carrying the scene (the true values), the seed and the sensitivity.
 
-    Values are written with 17 significant digits: the vibration signal is often 1e-6 of the mean.
+    The title and the scene are JSON-encoded, so each comment line stays one line whatever their
+    strings hold (a line break in the title cannot start a data row). TOML dates and times become
+    ISO 8601 text (what `sun.date` also accepts). Values are written with 17 significant digits:
+    the vibration signal is often 1e-6 of the mean.
     """
     header = [
         f"vibinverse {version} simulate",
-        f"title: {table.get('title', '')}",
-        f"seed: {seed}",
+        "title: " + json_line(table.get("title", "")),
+        f"seed: {None if seed is None else int(seed)}",
         f"sensitivity: {obs.sensitivity:.6e}",
-        "scene: " + json.dumps(table, separators=(",", ":")),
+        "scene: " + json.dumps(table, separators=(",", ":"), default=_jsonable),
     ]
     data = np.column_stack([obs.time, obs.intensity, obs.intensity_clean])
     with open(path, "w", encoding="utf-8") as fh:
         fh.writelines(f"# {line}\n" for line in header)
         fh.write("time,intensity,intensity_clean\n")
         np.savetxt(fh, data, delimiter=",", fmt="%.17g")
+
+
+def json_line(value: Any) -> str:
+    """`value` as JSON on one line, readable: non-ASCII text stays as it is, but every character that
+    is not printable (line and paragraph separators, controls, lone surrogates) is escaped."""
+    text = json.dumps(value, ensure_ascii=False, default=_jsonable)
+    return text if text.isprintable() else "".join(c if c.isprintable() else _escape(c) for c in text)
+
+
+def _escape(c: str) -> str:
+    o = ord(c)
+    if o > 0xFFFF:  # JSON escapes beyond the BMP as a UTF-16 surrogate pair
+        o -= 0x10000
+        return f"\\u{0xD800 + (o >> 10):04x}\\u{0xDC00 + (o & 0x3FF):04x}"
+    return f"\\u{o:04x}"
+
+
+def _jsonable(obj: Any) -> Any:
+    """JSON for what a scene table may hold beyond JSON: TOML dates and times, numpy values."""
+    if isinstance(obj, (dt.date, dt.time)):  # datetime is a date
+        return obj.isoformat()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return str(obj)
 
 
 def plot_series(path: Path, obs: Observation, title: str) -> None:
