@@ -9,6 +9,7 @@ import logging
 import math
 from pathlib import Path
 
+from forward.scene import format_bytes, memory_limit
 from vibinverse.detection import DETECTION_GAIN
 from vibinverse.errors import InputError, NumericalError, Unsupported
 from vibinverse.estimators import CasadiMap, Emcee, ScipyMap, SindyEstimator, SpectralEstimator
@@ -25,9 +26,19 @@ METHODS = ("spectral", "sindy", "casadi", "map", "mcmc", "auto")
 AMBIGUITY_MARGIN = DETECTION_GAIN
 
 
+FIT_BYTES_PER_SAMPLE = 3e3  # the scipy MAP, predictive band and draws: 2.3 kB a sample measured (frame)
+
+
 def check_priors(posterior: Posterior) -> None:
-    """One-line errors for frequency priors the data cannot resolve (above Nyquist, too few cycles)."""
+    """One-line errors for frequency priors the data cannot resolve (above Nyquist, too few cycles),
+    and for a series whose fit would not fit in memory (estimated before any allocation)."""
     series = posterior.series
+    need, limit = FIT_BYTES_PER_SAMPLE * series.time.size, memory_limit()
+    if need > limit:
+        raise InputError(
+            f"data: a fit of {series.time.size} samples needs about {format_bytes(need)}, above the memory "
+            f"limit {format_bytes(limit)} (VIBINVERSE_MEMORY_LIMIT, in bytes); fit a shorter stretch"
+        )
     nyq = 0.5 * series.fs
     for n, (lo, hi) in posterior.bounds.items():
         if n.split("[")[0].endswith("frequency"):

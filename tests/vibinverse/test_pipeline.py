@@ -118,3 +118,24 @@ def test_a_reading_the_data_cannot_rule_out_is_reported():
     assert sorted(alt["values"].values()) == pytest.approx(
         sorted([result.point["a.frequency"], result.point["b.frequency"]]), abs=1e-3
     )
+
+
+def test_a_fit_beyond_the_memory_limit_is_refused_and_casadi_steps_aside(monkeypatch, caplog):
+    """The casadi frame objective takes ~0.3 MB a sample: above the limit the scipy MAP runs instead;
+    a series whose fit as a whole would not fit is refused before any work."""
+    import logging
+
+    import vibinverse as vi
+    from vibinverse.errors import InputError
+    from vibinverse.io.builtin import builtin_scene
+
+    scene = vi.load_scene(builtin_scene("roof_frame"), ["noise.sigma=0.6", "sampling.duration=5"])
+    obs = vi.simulate(scene, seed=3)
+    s = vi.series(obs.time, obs.intensity, scene=scene)
+    monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", str(100e6))  # 1000 samples: 300 MB for casadi, 3 MB in all
+    with caplog.at_level(logging.INFO, logger="vibinverse"):
+        result = vi.fit(s, scene, method="casadi")
+    assert result.method == "map" and "above the memory limit" in caplog.text
+    monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", str(1e6))
+    with pytest.raises(InputError, match=r"a fit of 1000 samples needs about 3 MB, above the memory limit 1 MB"):
+        vi.fit(s, scene, method="spectral")

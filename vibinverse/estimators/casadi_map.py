@@ -11,7 +11,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from vibinverse.errors import InputError, NumericalError
+from forward.scene import format_bytes, memory_limit
+from vibinverse.errors import InputError, NumericalError, Unsupported
 from vibinverse.estimators.base import Estimator, register_estimator
 from vibinverse.estimators.scipy_map import MapPoint, map_result
 from vibinverse.posterior import Posterior
@@ -24,6 +25,13 @@ def _compiled(problem: Posterior):
     """(objective, IPOPT solver, exact Hessian function) for this problem's scene, priors and
     sampling; built once and reused for every series of the same design (a bench, a study)."""
     like = problem.model
+    n = like.series.time.size
+    need, limit = like.casadi_bytes_per_sample * n, memory_limit()
+    if need > limit:
+        raise Unsupported(
+            f"the casadi MAP would need about {format_bytes(need)} for {n} samples, above the memory "
+            f"limit {format_bytes(limit)} (VIBINVERSE_MEMORY_LIMIT)"
+        )
     key = (
         like.name,
         json.dumps(like.base, sort_keys=True, default=str),

@@ -47,6 +47,8 @@ class SignalModel(ABC):
     name: ClassVar[str]  # the registry key
     #: IPOPT runs from every start whose log posterior is within this margin of the best start's
     map_start_margin: ClassVar[float] = math.inf
+    #: memory the casadi MAP's compiled objective takes per sample (measured peak, rounded up)
+    casadi_bytes_per_sample: ClassVar[float] = 300e3
     #: values a scene file may leave out, with the value the forward model then uses
     scene_defaults: ClassVar[dict[str, float]] = {}
 

@@ -82,6 +82,7 @@ class DeterministicModel(SignalModel):
     """Deterministic vibrations (plate roofs, ground waves; secs. 4.1, 4.3) in white sensor noise."""
 
     name = "deterministic"
+    casadi_bytes_per_sample = 40e3  # 200 MB at 5000 samples (one line)
     scene_defaults: ClassVar[dict[str, float]] = {"sun.irradiance": 1.0}  # forward.scene.Sun
 
     @classmethod

@@ -81,6 +81,7 @@ class FrameModel(SignalModel):
 
     name = "frame"
     map_start_margin = 50.0  # a swapped drive/resonance assignment starts far below the best
+    casadi_bytes_per_sample = 300e3  # the Kalman recursion expanded to SX: 1.2 GB at 4000 samples
 
     @classmethod
     def describes(cls, table: dict) -> bool:
