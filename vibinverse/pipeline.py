@@ -29,7 +29,7 @@ AMBIGUITY_MARGIN = DETECTION_GAIN
 FIT_BYTES_PER_SAMPLE = 3e3  # the scipy MAP, predictive band and draws: 2.3 kB a sample measured (frame)
 
 
-def check_priors(posterior: Posterior) -> None:
+def check_fit(posterior: Posterior) -> None:
     """One-line errors for frequency priors the data cannot resolve (above Nyquist, too few cycles),
     and for a series whose fit would not fit in memory (estimated before any allocation)."""
     series = posterior.series
@@ -63,7 +63,7 @@ def run(
     """Fit `posterior` by `method` (one of METHODS); the result's timing holds every stage's seconds."""
     if method not in METHODS:
         raise InputError(f"--method: {method!r} is not one of {', '.join(METHODS)}")
-    check_priors(posterior)
+    check_fit(posterior)
     if method == "sindy" and not SindyEstimator.covers(posterior):
         SindyEstimator().estimate(posterior, None)  # raises Unsupported with the reason
     timing: dict[str, float] = {}
@@ -117,6 +117,8 @@ def map_stage(posterior: Posterior, start: FitResult, method: str, seed: int) ->
         again.timing = {
             k: again.timing.get(k, 0.0) + result.timing.get(k, 0.0) for k in {*again.timing, *result.timing}
         }
+        if "ambiguous" in result.diagnostics:
+            again.diagnostics["ambiguous"] = result.diagnostics["ambiguous"]
         result = again
     if facts:
         result.data["model"] = {**result.data.get("model", {}), **posterior.model.describe(), **facts}
@@ -134,7 +136,8 @@ def _alternatives(posterior: Posterior, best: FitResult, method: str, seed: int)
         runs.append((what, _map(posterior, base_result(posterior, "start", start, starts=[start]), method, seed)))
     if not runs:
         return best
-    timing = {k: sum(r.timing.get(k, 0.0) for r in [best, *(r for _, r in runs)]) for k in best.timing}
+    every = [best, *(r for _, r in runs)]
+    timing = {k: sum(r.timing.get(k, 0.0) for r in every) for k in dict.fromkeys(k for r in every for k in r.timing)}
     chosen = max([("the first reading", best), *runs], key=lambda wr: _finite(wr[1].log_post))
     winner = chosen[1]
     ambiguous = []
