@@ -16,7 +16,8 @@ import vibinverse as vi
 scene = vi.load_scene("examples/scenes/roof_frame.toml", overrides=["noise.sigma=0.6"])  # validated table
 obs = vi.simulate(scene, seed=3)  # time, intensity, intensity_clean, sensitivity
 series = vi.series(obs.time, obs.intensity, scene=scene)  # scene: the summary reports the true values
-# measured data instead: series = vi.load_series("frame.csv")  (CSV, .npy, .npz or netCDF)
+# measured data instead: series = vi.load_series("frame.csv")  (CSV/TSV, Parquet, .npy, .npz or netCDF;
+#   a table's columns: time_column=, value_column=, or fs= for values only; series.notes: time reference, units)
 
 result = vi.fit(series, scene, method="map")  # MAP + Laplace; "casadi": exact derivatives; "auto": + emcee
 for name, p in result.summary()["parameters"].items():  # the JSON the CLI writes

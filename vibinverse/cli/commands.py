@@ -137,10 +137,12 @@ def cmd_fit(args: argparse.Namespace) -> None:
     for p in (out, summary_path):
         if not p.parent.is_dir():
             raise InputError(f"output: cannot write {p}: no such directory")
-    series = api.load_series(args.data)
+    series = api.load_series(args.data, time_column=args.time_column, value_column=args.value_column, fs=args.fs)
     table = api.load_scene(args.scene, args.set or [])
     free = parse_free(args.free or [], table.get("infer"))
     logger.info(f"data: {series.describe()}")
+    for note in series.notes:
+        logger.info(f"data: {note}")
     result = api.fit(
         series,
         table,
@@ -315,7 +317,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="measured series + scene -> posterior of resonances, drives, vibration "
         "lines and noise (a frame scene: Kalman likelihood; plate or ground: white noise)",
     )
-    fit.add_argument("data", help="series: CSV (time,intensity), .npy, .npz or netCDF; NaN = gap")
+    fit.add_argument(
+        "data",
+        help="series: CSV/TSV (delimiter sniffed; columns time,intensity), Parquet, .npy, .npz or netCDF; NaN = gap",
+    )
+    fit.add_argument("--time-column", metavar="NAME", help="time column of a CSV/TSV or Parquet table (default: time)")
+    fit.add_argument(
+        "--value-column", metavar="NAME", help="value column of a CSV/TSV or Parquet table (default: intensity)"
+    )
+    fit.add_argument(
+        "--fs", type=float, metavar="HZ", help="sampling rate of a table without a time column: time = arange(n) / fs"
+    )
     fit.add_argument("--scene", required=True, help="scene file describing the observation (TOML)")
     fit.add_argument("--set", action="append", metavar="dotted.key=value", help="override a scene value")
     fit.add_argument(

@@ -1,4 +1,4 @@
-"""Measured series: read CSV / .npy / .npz / netCDF, validate, and report gaps.
+"""Measured series: read CSV / TSV / Parquet / .npy / .npz / netCDF, validate, and report gaps.
 
 A NaN intensity is a gap (a missing sample): kept, counted and handled by the likelihoods. Every
 problem raises `vibinverse.errors.DataError` with one line naming it.
@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import copy
 import csv as csvlib
+import math
+import re
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +32,7 @@ class Series:
     intensity: NDArray[np.float64]  # NaN = gap
     source: str
     scene: dict[str, Any] | None = None  # the true scene, when the file carries it (vibinverse simulate)
-    notes: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)  # what the reader recorded: a time reference, units
 
     @property
     def gaps(self) -> NDArray[np.bool_]:
@@ -133,28 +135,92 @@ def netcdf_format(p: Path, what: str) -> str:
     raise DataError(f"{what}: {p} is not a netCDF file (it has neither the netCDF-4/HDF5 nor the netCDF-3 signature)")
 
 
-def load_series(path: str | Path) -> Series:
-    """Read and validate a series. Formats: CSV with columns time,intensity (more named columns are
-    ignored; '#' comment lines allowed, '# scene: {json}' carries the truth), .npy (N x 2),
-    .npz (arrays 'time' and 'intensity'), netCDF (.nc; variables 'time' and 'intensity'; a time
-    with CF units, e.g. 'milliseconds since 2024-01-01', is converted to seconds)."""
+def load_series(
+    path: str | Path, *, time_column: str | None = None, value_column: str | None = None, fs: float | None = None
+) -> Series:
+    """Read and validate a series. Formats: a table, CSV / TSV (delimiter sniffed from the header:
+    comma, semicolon, tab or whitespace; '#' comment lines allowed, '# scene: {json}' carries the
+    truth) or Parquet (.parquet), with columns `time_column` (default time) and `value_column`
+    (default intensity), named case-insensitively, more named columns ignored; a time of ISO 8601
+    date-times (or datetime64) becomes seconds since the first sample (noted in `Series.notes`);
+    `fs` (Hz) gives the time of a table without a time column, arange(n) / fs. Decimal commas are
+    refused. Also .npy (N x 2), .npz (arrays 'time' and 'intensity'), netCDF (.nc; variables 'time'
+    and 'intensity'; a time with CF units, e.g. 'milliseconds since 2024-01-01', is converted to
+    seconds since its epoch; the intensity's units are noted, its values kept)."""
     p = check_file(path, "data")
+    fs = _check_fs(fs)
     suffix = p.suffix.lower()
-    scene = None
+    table = suffix not in (".npy", ".npz", ".nc", ".netcdf", ".cdf")
+    if not table and (time_column is not None or value_column is not None or fs is not None):
+        raise DataError(
+            f"data: time_column, value_column and fs apply to CSV/TSV and Parquet tables, not {suffix} files"
+        )
+    scene, notes = None, []
     try:
         if suffix == ".npy":
             t, x = _read_npy(p)
         elif suffix == ".npz":
             t, x = _read_npz(p)
-        elif suffix in (".nc", ".netcdf", ".cdf"):
-            t, x = _read_netcdf(p)
+        elif not table:
+            t, x, notes = _read_netcdf(p)
+        elif suffix == ".parquet":
+            t, x, notes = _read_parquet(p, time_column, value_column, fs)
         else:
-            t, x, scene = _read_csv(p)
+            t, x, scene, notes = _read_csv(p, time_column, value_column, fs)
     except DataError:
         raise
     except (OSError, ValueError, TypeError, KeyError, IndexError, EOFError, zipfile.BadZipFile) as exc:
         raise DataError(f"data: cannot read {p}: {_first_line(exc)}") from None
-    return validate(t, x, str(p), scene)
+    return validate(t, x, str(p), scene, notes)
+
+
+def _check_fs(fs: Any) -> float | None:
+    if fs is None:
+        return None
+    try:
+        value = float(fs)
+    except (TypeError, ValueError):
+        raise DataError(f"data: fs: {fs!r} is not a number (the sampling rate in Hz)") from None
+    if isinstance(fs, bool) or not (math.isfinite(value) and value > 0):
+        raise DataError(f"data: fs: {fs!r} Hz; allowed range (0, inf)")
+    return value
+
+
+def _columns(
+    p: Path, names: list[str], time_column: str | None, value_column: str | None, fs: float | None
+) -> tuple[int | None, int]:
+    """The indices of the time column (None: the time comes from `fs`) and of the value column among
+    `names` (case-insensitive); a missing, doubled or ambiguous column is a one-line DataError."""
+    lower = [str(c).strip().lower() for c in names]
+    shown = ",".join(map(str, names))
+
+    def find(name: str) -> int | None:
+        key = name.strip().lower()
+        if lower.count(key) > 1:
+            raise DataError(f"data: {p} header names the column {key} twice: {shown}")
+        return lower.index(key) if key in lower else None
+
+    it = find(time_column or "time")
+    if fs is not None and (time_column is not None or it is not None):
+        raise DataError(
+            f"data: {p} has a time column ({names[it] if it is not None else time_column}) and fs was given: "
+            "the time is ambiguous; drop fs (--fs) or the time column"
+        )
+    ix = find(value_column or "intensity")
+    if ix is None and value_column is None and fs is not None and len(names) == 1:
+        ix = 0  # values only: the one column there is
+    missing = []
+    if ix is None:
+        what = repr(value_column) if value_column is not None else "intensity"
+        missing.append(f"no value column {what} (choose it with value_column=, --value-column)")
+    if it is None and fs is None:
+        what = repr(time_column) if time_column is not None else "time"
+        missing.append(f"no time column {what} (name it with time_column=, --time-column, or give fs=, --fs)")
+    if missing:
+        raise DataError(f"data: {p} has {' and '.join(missing)}; its columns: {shown}")
+    if it == ix:
+        raise DataError(f"data: {p}: the time and the value column are the same column ({names[ix]})")
+    return it, ix
 
 
 def _first_line(exc: BaseException) -> str:
@@ -202,7 +268,7 @@ def _np_load(p: Path, load, what: str) -> np.ndarray:
         raise
 
 
-def _read_netcdf(p: Path) -> tuple[np.ndarray, np.ndarray]:
+def _read_netcdf(p: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
     import xarray as xr
 
     engine = "h5netcdf" if netcdf_format(p, "data") == "hdf5" else "scipy"
@@ -220,19 +286,102 @@ def _read_netcdf(p: Path) -> tuple[np.ndarray, np.ndarray]:
         x = _numbers(xa.values, f"{p}: intensity")
         t = _numbers(ta.values, f"{p}: time")
         units = ta.attrs.get("units")
+        x_units = xa.attrs.get("units")
+    notes = []
     if units is not None:
-        unit = str(units).strip().lower().split(" since ")[0].strip()
+        text = str(units).strip()
+        unit, _, epoch = text.lower().partition(" since ")
+        unit = unit.strip()
         if unit not in _TIME_UNITS:
             raise DataError(
                 f"data: {p}: time units {str(units)!r} are not a time unit; allowed: seconds, milliseconds, "
                 "microseconds, nanoseconds, minutes, hours, days (optionally 'since' an epoch)"
             )
         t = t.astype(float) * _TIME_UNITS[unit]
-    return t, x
+        if epoch.strip():  # a CF date axis (datetime64 written by xarray): seconds since its epoch
+            notes.append(f"time: seconds since {text[text.lower().index(' since ') + 7 :].strip()}")
+    if x_units is not None and str(x_units).strip():
+        notes.append(f"intensity units: {str(x_units).strip()} (values kept; the fit's gain absorbs them)")
+    return t, x, notes
 
 
-def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray, dict | None]:
-    scene, header, rows = None, None, []
+def _read_parquet(
+    p: Path, time_column: str | None, value_column: str | None, fs: float | None
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    _signature(p, b"PAR1", "Parquet", "PAR1")
+    try:
+        import pandas as pd
+        import pyarrow  # noqa: F401 - pandas' Parquet engine
+    except ImportError:
+        raise DataError("data: reading Parquet needs pyarrow: pip install 'vibinverse[parquet]'") from None
+    df = pd.read_parquet(p)
+    if any(name is not None for name in df.index.names):  # a named index (a time, often) is a column
+        df = df.reset_index()
+    names = [str(c) for c in df.columns]
+    it, ix = _columns(p, names, time_column, value_column, fs)
+    x = _table_column(df.iloc[:, ix], f"{p}: {names[ix]}")
+    if it is None:
+        return np.arange(x.size) / fs, x, []
+    col = df.iloc[:, it]
+    if pd.api.types.is_datetime64_any_dtype(col):
+        stamps = pd.DatetimeIndex(col)
+        if stamps.hasnans:
+            raise DataError(f"data: {p}: time column {names[it]} has missing date-times")
+        t, note = _since_first(stamps)
+        return t, x, [note]
+    return _table_column(col, f"{p}: time"), x, []
+
+
+def _table_column(col: Any, what: str) -> np.ndarray:
+    """A pandas column as float64 (missing values NaN) if it holds numbers, else `_numbers`'s refusal."""
+    import pandas as pd
+
+    if pd.api.types.is_numeric_dtype(col) and not pd.api.types.is_bool_dtype(col):
+        return col.to_numpy(dtype=float, na_value=np.nan)
+    return _numbers(col.to_numpy(), what)
+
+
+def _since_first(stamps: Any) -> tuple[np.ndarray, str]:
+    """Seconds since the first of `stamps` (a pandas DatetimeIndex; an aware one is converted to UTC
+    first) and the note recording that reference."""
+    ref = stamps[0].isoformat()
+    if stamps.tz is not None:
+        stamps = stamps.tz_convert("UTC").tz_localize(None)
+    d = stamps.to_numpy()
+    return (d - d[0]) / np.timedelta64(1, "s"), f"time: seconds since {ref}"
+
+
+# an ISO 8601 date-time (date, optional time with decimal-point fraction, optional zone), and a
+# number written with a decimal comma (1,5 or -0,25e-3): refused, never guessed
+_ISO = re.compile(r"\d{4}-\d{2}-\d{2}(?:[T ]\d{2}:\d{2}(?::\d{2}(?:\.\d+)?)?)?(Z|[+-]\d{2}:?\d{2})?")
+_DECIMAL_COMMA = re.compile(r"[+-]?(?:\d+,\d*|,\d+)(?:[eE][+-]?\d+)?")
+
+
+def _splitter(header: str) -> tuple[Any, bool]:
+    """How the lines split into cells, from the header: the delimiter (comma, semicolon or tab)
+    that gives it the most cells, else whitespace, else one column; and whether it is the tab."""
+    counts = {d: len(next(csvlib.reader([header], delimiter=d))) for d in (",", ";", "\t")}
+    best = max(counts, key=counts.get)  # ties keep the first: comma
+    if counts[best] == 1 and len(header.split()) > 1:
+        return (lambda s: s.split()), False
+    return (lambda s: [c.strip() for c in next(csvlib.reader([s], delimiter=best))]), best == "\t"
+
+
+def _float(cell: str, p: Path, n: int, s: str) -> float:
+    try:
+        return float(cell)
+    except ValueError:
+        if _DECIMAL_COMMA.fullmatch(cell):
+            raise DataError(
+                f"data: {p} line {n}: {cell!r} has a decimal comma; write decimal points (1.5, not 1,5)"
+            ) from None
+        raise DataError(f"data: {p} line {n}: not a number: {s[:60]}") from None
+
+
+def _read_csv(
+    p: Path, time_column: str | None, value_column: str | None, fs: float | None
+) -> tuple[np.ndarray, np.ndarray, dict | None, list[str]]:
+    scene, header, values, times, stamps, zone = None, None, [], [], None, None
     with open(p, encoding="utf-8-sig", newline="") as fh:  # utf-8-sig: a byte-order mark is not part of the header
         for n, line in enumerate(fh, 1):
             s = line.strip()
@@ -245,30 +394,61 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray, dict | None]:
                     except ValueError:  # not JSON: the file carries no truth
                         scene = None
                 continue
-            cells = [c.strip() for c in next(csvlib.reader([s]))]
             if header is None:
+                split, tabs = _splitter(s)
+                cells = split(s)
                 header = [c.lower() for c in cells]
-                if "time" not in header or "intensity" not in header:
-                    raise DataError(f"data: {p} header must name columns time and intensity, got {','.join(cells)}")
-                for name in ("time", "intensity"):
-                    if header.count(name) > 1:
-                        raise DataError(f"data: {p} header names the column {name} twice: {','.join(cells)}")
-                it, ix = header.index("time"), header.index("intensity")
+                it, ix = _columns(p, cells, time_column, value_column, fs)
+                need = max(ix, -1 if it is None else it)
                 continue
+            cells = split(line.strip(" \r\n") if tabs else s)  # a tab-separated row may end in an empty cell
             # a row with more cells than the header is malformed (a decimal comma, a missing header
             # name): taking its first cells would read the wrong numbers
-            if len(cells) <= max(it, ix) or any(cells[len(header) :]):
+            if len(cells) <= need or any(cells[len(header) :]):
                 raise DataError(
                     f"data: {p} line {n}: {len(cells)} cells; the header names {len(header)} ({','.join(header)})"
                 )
-            try:
-                rows.append((float(cells[it]), float(cells[ix] or "nan")))
-            except ValueError:
-                raise DataError(f"data: {p} line {n}: not a number: {s[:60]}") from None
+            if it is not None:
+                cell = cells[it]
+                if stamps is None:  # the first row decides: numbers (seconds) or ISO 8601 date-times
+                    stamps = not _is_float(cell) and _ISO.fullmatch(cell) is not None
+                if stamps:
+                    m = _ISO.fullmatch(cell)
+                    if m is None:
+                        raise DataError(f"data: {p} line {n}: not an ISO 8601 date-time: {cell[:40]}")
+                    if zone is None:
+                        zone = m.group(1) is not None
+                    elif zone != (m.group(1) is not None):
+                        raise DataError(f"data: {p} line {n}: date-times with and without a time zone are mixed")
+                    times.append(cell)
+                else:
+                    times.append(_float(cell, p, n, s))
+            values.append(_float(cells[ix] or "nan", p, n, s))
     if header is None:
         raise DataError(f"data: {p} has no header row time,intensity")
-    arr = np.array(rows, dtype=float).reshape(-1, 2)
-    return arr[:, 0], arr[:, 1], scene
+    x, notes = np.array(values, dtype=float), []
+    if it is None:
+        t = np.arange(x.size) / fs
+    elif stamps:
+        import pandas as pd
+
+        try:
+            t, note = _since_first(pd.DatetimeIndex(pd.to_datetime(times, format="ISO8601", utc=bool(zone))))
+        except (ValueError, OverflowError) as exc:
+            why = _first_line(exc).split(" You might")[0]  # pandas' advice names its own options
+            raise DataError(f"data: {p}: time: not ISO 8601 date-times: {why}") from None
+        notes.append(note)
+    else:
+        t = np.array(times, dtype=float)
+    return t, x, scene, notes
+
+
+def _is_float(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
 
 
 def _numbers(a: Any, what: str) -> np.ndarray:
@@ -284,7 +464,9 @@ def _numbers(a: Any, what: str) -> np.ndarray:
     raise DataError(f"data: {what} holds {_KINDS.get(kind, kind)} (dtype {a.dtype}); real numbers{unit} are needed")
 
 
-def validate(t: Any, x: Any, source: str = "array", scene: dict | None = None) -> Series:
+def validate(
+    t: Any, x: Any, source: str = "array", scene: dict | None = None, notes: list[str] | None = None
+) -> Series:
     """Check a series; NaN intensities are gaps, anything else non-finite is an error. Refused, each
     with one line: non-numeric, complex or boolean values, fewer than 16 samples, a time that is not
     strictly increasing, values beyond +-MAX_ABS, and an intensity that is constant (or varies by
@@ -319,7 +501,7 @@ def validate(t: Any, x: Any, source: str = "array", scene: dict | None = None) -
             f"data: the intensity varies by only {spread:g} (peak to peak); at least {MIN_SPREAD:g} is needed "
             "(rescale the data)"
         )
-    return Series(t, x, source, scene)
+    return Series(t, x, source, scene, list(notes or []))
 
 
 def _in_range(a: np.ndarray, what: str) -> None:

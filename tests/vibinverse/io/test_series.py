@@ -186,3 +186,176 @@ def test_real_data_scales_are_accepted():
     validate(T, 1e-9 * (1 + 1e-3 * X))
     validate(1.7e9 + T, X)
     validate(T, 1e90 * X)
+
+
+# ------------------------------------------------------------------ tables: delimiters, named columns, dates, fs
+
+ROOF_ELASTIC = Path(__file__).resolve().parents[3] / "examples" / "scenes" / "roof_elastic.toml"
+START = np.datetime64("2024-06-21T09:30:00", "us")
+
+
+@pytest.fixture(scope="module")
+def plate(tmp_path_factory):
+    """A short simulated plate series, its canonical CSV (`vibinverse simulate`'s) and that CSV's
+    spectral fit (medians)."""
+    from vibinverse.io.simulation import write_series_csv
+
+    table = vi.load_scene(ROOF_ELASTIC)
+    obs = vi.simulate(table, seed=1)
+    folder = tmp_path_factory.mktemp("plate")
+    write_series_csv(folder / "canonical.csv", obs, table, 1, "test")
+    return obs, folder, _medians(folder / "canonical.csv")
+
+
+def _medians(data, **options) -> dict[str, float]:
+    series = load_series(data, **options) if options else data
+    result = vi.fit(series, ROOF_ELASTIC, method="spectral")
+    return {k: v["median"] for k, v in result.summary()["parameters"].items()}
+
+
+def _stamps(t: np.ndarray) -> np.ndarray:
+    return START + np.round(t * 1e6).astype("timedelta64[us]")  # ISO date-times to the microsecond
+
+
+def _same_fit(got: dict[str, float], want: dict[str, float], rtol: float = 1e-9) -> None:
+    assert got.keys() == want.keys()
+    for name, value in want.items():
+        assert got[name] == pytest.approx(value, rel=rtol, abs=1e-300), name
+
+
+def test_semicolon_csv_with_iso_times_and_named_columns_fits_like_the_csv(plate):
+    obs, folder, want = plate
+    p = folder / "stamped.csv"
+    rows = "".join(f"{s};{float(x)!r};7\n" for s, x in zip(np.datetime_as_string(_stamps(obs.time)), obs.intensity))
+    p.write_text("# from a logger\nStamp;Pixel (counts);Other\n" + rows)
+    s = load_series(p, time_column="stamp", value_column="pixel (counts)")
+    assert s.notes == ["time: seconds since 2024-06-21T09:30:00"]
+    np.testing.assert_allclose(s.time, obs.time, rtol=0, atol=1e-6)  # what the rounding to microseconds allows
+    _same_fit(_medians(s), want)  # at 1 kHz the microsecond stamps are exact
+
+
+def test_values_only_with_fs_fits_like_the_csv(plate):
+    obs, folder, want = plate
+    p = folder / "values.csv"
+    p.write_text("intensity\n" + "".join(f"{float(x)!r}\n" for x in obs.intensity))
+    _same_fit(_medians(p, fs=1000.0), want)
+    q = folder / "volts.csv"  # one column: it is the value column whatever its name
+    q.write_text("Volts\n" + "".join(f"{float(x)!r}\n" for x in obs.intensity))
+    np.testing.assert_array_equal(load_series(q, fs=1000.0).intensity, obs.intensity)
+
+
+def test_netcdf_with_datetime64_time_and_units_fits_like_the_csv(plate):
+    import xarray as xr
+
+    obs, folder, want = plate
+    p = folder / "dated.nc"
+    stamps = START.astype("datetime64[ns]") + np.round(obs.time * 1e9).astype("timedelta64[ns]")
+    xr.Dataset({"intensity": ("time", obs.intensity, {"units": "mV"})}, coords={"time": stamps}).to_netcdf(
+        p, engine="h5netcdf"
+    )
+    s = load_series(p)
+    assert any(n.startswith("time: seconds since 2024-06-21") for n in s.notes)
+    assert any(n.startswith("intensity units: mV") for n in s.notes)
+    np.testing.assert_array_equal(s.intensity, obs.intensity)  # units noted, values kept
+    _same_fit(_medians(s), want)
+
+
+def test_parquet_fits_like_the_csv(plate):
+    pd = pytest.importorskip("pandas")
+    pytest.importorskip("pyarrow")
+    obs, folder, want = plate
+    p = folder / "d.parquet"
+    pd.DataFrame({"Time": obs.time, "INTENSITY": obs.intensity, "other": 1.0}).to_parquet(p)
+    _same_fit(_medians(p), want)
+    q = folder / "dated.parquet"
+    pd.DataFrame({"when": _stamps(obs.time), "v": obs.intensity}).to_parquet(q)
+    s = load_series(q, time_column="when", value_column="v")
+    assert s.notes == ["time: seconds since 2024-06-21T09:30:00"]
+    np.testing.assert_allclose(s.time, obs.time, rtol=0, atol=1e-6)
+    with pytest.raises(DataError, match=r"no value column intensity .*value_column.*; its columns: when,v"):
+        load_series(q, time_column="when")
+    r = folder / "indexed.parquet"  # a named index (pandas' usual time axis) is a column
+    pd.DataFrame({"intensity": obs.intensity}, index=pd.Index(obs.time, name="time")).to_parquet(r)
+    np.testing.assert_array_equal(load_series(r).time, obs.time)
+
+
+def test_tsv_and_whitespace_tables_read_as_the_csv(tmp_path):
+    for name, sep in (("d.tsv", "\t"), ("d.txt", "   ")):
+        p = tmp_path / name
+        rows = "".join(f"{float(t)!r}{sep}{float(x)!r}\n" for t, x in zip(T, X))
+        p.write_text(f"# tab or spaces\ntime{sep}intensity\n" + rows)
+        s = load_series(p)
+        np.testing.assert_array_equal(s.time, T)
+        np.testing.assert_array_equal(s.intensity, X)
+    gap = tmp_path / "gap.tsv"  # a tab row ending in an empty cell is a gap
+    gap.write_text("time\tintensity\n" + "".join(f"{t}\t{'' if i == 3 else x}\n" for i, (t, x) in enumerate(zip(T, X))))
+    assert load_series(gap).n_gaps == 1
+
+
+BAD_TABLES = {
+    "two_values.csv": (
+        "time,left,right\n" + "".join(f"{t},{x},{x}\n" for t, x in zip(T, X)),
+        {},
+        r"no value column intensity \(choose it with value_column=, --value-column\); its columns: time,left,right",
+    ),
+    "decimal_commas.csv": (
+        "time;intensity\n" + "".join(f"{t:.2f};{x:.6f}\n".replace(".", ",") for t, x in zip(T, X)),
+        {},
+        r"line 2: '0,00' has a decimal comma; write decimal points",
+    ),
+    "fs_and_time.csv": (
+        "time,intensity\n" + "".join(f"{t},{x}\n" for t, x in zip(T, X)),
+        {"fs": 100.0},
+        r"has a time column \(time\) and fs was given: the time is ambiguous",
+    ),
+    "no_such_column.csv": (
+        "time,intensity\n" + "".join(f"{t},{x}\n" for t, x in zip(T, X)),
+        {"value_column": "volts"},
+        r"no value column 'volts' .*; its columns: time,intensity",
+    ),
+    "bad_stamp.csv": (
+        "time,intensity\n2024-06-21T09:30:00,1\n2024-06-21T09:30:01,2\nlater,3\n",
+        {},
+        r"line 4: not an ISO 8601 date-time: later",
+    ),
+    "zero_fs.csv": ("intensity\n" + "".join(f"{x}\n" for x in X), {"fs": 0.0}, r"fs: 0.0 Hz; allowed range \(0, inf\)"),
+    "nan_fs.csv": ("intensity\n" + "".join(f"{x}\n" for x in X), {"fs": float("nan")}, r"fs: nan Hz"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_TABLES))
+def test_a_table_that_is_ambiguous_is_refused_in_one_line(name, tmp_path):
+    text, options, message = BAD_TABLES[name]
+    p = tmp_path / name
+    p.write_text(text)
+    with pytest.raises(DataError, match=message) as err:
+        load_series(p, **options)
+    assert "\n" not in str(err.value) and str(err.value).startswith("data: ")
+
+
+def test_table_options_on_arrays_are_refused(tmp_path):
+    np.save(tmp_path / "d.npy", np.column_stack([T, X]))
+    with pytest.raises(DataError, match=r"apply to CSV/TSV and Parquet tables, not \.npy files"):
+        load_series(tmp_path / "d.npy", fs=100.0)
+
+
+def test_cli_fit_reads_named_columns_and_fs(tmp_path, plate):
+    import contextlib
+    import io
+    import json
+
+    from vibinverse.cli import main
+
+    obs, _, want = plate
+    p = tmp_path / "v.csv"
+    p.write_text("frame;Pixel\n" + "".join(f"{i};{float(x)!r}\n" for i, x in enumerate(obs.intensity)))
+    out, err = io.StringIO(), io.StringIO()
+    args = ["fit", str(p), "--scene", str(ROOF_ELASTIC), "--method", "spectral", "--no-progress", "-q"]
+    files = ["-o", str(tmp_path / "r.nc"), "--summary", str(tmp_path / "r.json")]
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        assert main([*args, "--value-column", "pixel", "--fs", "1000", *files]) == 0
+        assert main([*args, "--fs", "1000", *files]) == 2  # two columns, none named intensity
+    summary = json.loads((tmp_path / "r.json").read_text())
+    _same_fit({k: v["median"] for k, v in summary["parameters"].items()}, want)
+    lines = err.getvalue().strip().splitlines()
+    assert len(lines) == 1 and "no value column intensity" in lines[0] and "--value-column" in lines[0]
