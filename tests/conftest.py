@@ -165,3 +165,30 @@ def fit_args(d, name, *extra, steps=400):
         str(d / f"{name}.json"),
         *extra,
     )
+
+
+def unbounded_result():
+    """A result with a normal prior (bounds -inf, inf), NaN MCMC diagnostics and an infinite timing."""
+    import math
+
+    import vibinverse as vi
+    from vibinverse.priors import Prior
+    from vibinverse.result import FitResult
+
+    t = np.arange(64) * 0.01
+    return FitResult(
+        method="mcmc",
+        names=["noise.sigma", "surfaces.roof.motion.frequency"],
+        priors=[Prior("normal", (0.6, 0.1)), Prior("uniform", (1.0, 50.0))],
+        point={"noise.sigma": 0.55, "surfaces.roof.motion.frequency": 20.0},
+        series=vi.series(t, np.sin(2 * np.pi * 20 * t)),
+        sd={"noise.sigma": 0.05, "surfaces.roof.motion.frequency": math.inf},
+        diagnostics={
+            "converged": False,
+            "rhat_max": math.nan,
+            "ess_min": np.float64("nan"),
+            "tau_max": math.inf,
+            "n_steps": 10,
+        },
+        timing={"mcmc_s": 1.5},
+    )

@@ -102,26 +102,10 @@ def test_a_crafted_result_renders_no_live_markup(result_file, tmp_path):
 def test_a_report_of_nulls_and_non_finite_numbers(tmp_path):
     """Unbounded priors, NaN R-hat, no sd and no predictive bands: the page renders, the warnings
     say what they can."""
-    import math
-
-    import numpy as np
-
-    import vibinverse as vi
-    from vibinverse.priors import Prior
+    from tests.conftest import unbounded_result
     from vibinverse.report import warnings_for, write_report
-    from vibinverse.result import FitResult
 
-    t = np.arange(64) * 0.01
-    result = FitResult(
-        method="mcmc",
-        names=["noise.sigma", "surfaces.roof.motion.frequency"],
-        priors=[Prior("normal", (0.6, 0.1)), Prior("uniform", (1.0, 50.0))],
-        point={"noise.sigma": 0.55, "surfaces.roof.motion.frequency": 20.0},
-        series=vi.series(t, np.sin(2 * np.pi * 20 * t)),
-        sd={"noise.sigma": 0.05, "surfaces.roof.motion.frequency": math.inf},
-        diagnostics={"converged": False, "rhat_max": math.nan, "tau_max": math.inf, "n_steps": 10},
-        timing={"mcmc_s": 1.5},
-    )
+    result = unbounded_result()
     page = write_report(result.to_netcdf(tmp_path / "r.nc"), tmp_path).read_text()
     assert "not converged" in page and "noise.sigma" in page
     # the same summary as strict JSON gives nulls (a result.json read back by json.load)

@@ -10,12 +10,11 @@ import numpy as np
 import pytest
 
 import vibinverse as vi
-from tests.conftest import run_cli
+from tests.conftest import run_cli, unbounded_result
 from vibinverse.errors import DataError
 from vibinverse.io import jsonio
 from vibinverse.io.builtin import builtin_scene
-from vibinverse.priors import Prior
-from vibinverse.result import FitResult, read_result
+from vibinverse.result import read_result
 
 CORPUS = Path(__file__).resolve().parents[1] / "corpus" / "data"
 
@@ -35,26 +34,11 @@ def result_file(tmp_path_factory) -> Path:
     return path
 
 
-def _unbounded_result() -> FitResult:
-    """A result with a normal prior (bounds -inf, inf), NaN MCMC diagnostics and an infinite timing."""
-    t = np.arange(64) * 0.01
-    return FitResult(
-        method="mcmc",
-        names=["noise.sigma", "surfaces.roof.motion.frequency"],
-        priors=[Prior("normal", (0.6, 0.1)), Prior("uniform", (1.0, 50.0))],
-        point={"noise.sigma": 0.55, "surfaces.roof.motion.frequency": 20.0},
-        series=vi.series(t, np.sin(2 * np.pi * 20 * t)),
-        sd={"noise.sigma": 0.05, "surfaces.roof.motion.frequency": math.inf},
-        diagnostics={"converged": False, "rhat_max": math.nan, "ess_min": np.float64("nan"), "tau_max": math.inf},
-        timing={"mcmc_s": 1.5},
-    )
-
-
 # ------------------------------------------------------------------ strict JSON
 
 
 def test_the_summary_in_the_result_is_strict_json_and_says_which_values_were_not_finite(tmp_path):
-    result = _unbounded_result()
+    result = unbounded_result()
     text = result.to_inference_data().observed_data.attrs["vibinverse_summary"]
     doc = strict_loads(text)
     sigma = doc["parameters"]["noise.sigma"]
