@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # Render a vibinverse report in headless Chromium and save a screenshot, to check that the
 # self-contained HTML (all figures embedded) displays without network access.
-#   bash examples/render_report.sh vibinverse-demo/report.html report.png
+#   bash examples/render_report.sh vibinverse-demo report.png     # a report's directory (-o DIR) or its report.html
 # Needs Debian's chromium (apt-get install chromium).
 set -euo pipefail
-html=$(realpath "$1")
+html=$1
+[ -d "$html" ] && html=$html/report.html
+html=$(realpath "$html")
 png=${2:-report.png}
 chromium --headless --no-sandbox --disable-gpu --disable-quic --no-first-run \
   --disable-background-networking --disable-component-update --disable-sync \

@@ -230,7 +230,9 @@ def _surface(t: Table, name: str, x: tuple[float, float], y: tuple[float, float]
     material = material_from_spec(t.raw("material", "ground"), t.path("material"))
     lobe = None
     if isinstance(material, Fresnel):
-        lobe = t.number("lobe_width", lo=0.0, hi=0.5, lo_open=True)
+        # below 1e-9 rad the lobe's normalization 1 / (2 pi m^2) leaves float64 (and no surface is
+        # that smooth: a polished mirror's RMS slope is ~1e-5 rad)
+        lobe = t.number("lobe_width", lo=1e-9, hi=0.5)
     motion = None
     mt = t.table("motion", required=False) if allow_motion else None
     if mt is not None:

@@ -129,8 +129,8 @@ def run_cli(*args, **kw):
 
 @pytest.fixture(scope="session")
 def short_data(tmp_path_factory):
-    """A 4 s frame series simulated by the command line (data.csv), once per session: each test
-    that fits it writes its own names beside it."""
+    """A 4 s frame series simulated by the command line (series.csv), once per session: each test
+    that fits it writes into its own directory beside it (`fit_args`)."""
     d = tmp_path_factory.mktemp("fit")
     r = run_cli(
         "simulate",
@@ -142,16 +142,17 @@ def short_data(tmp_path_factory):
         "--seed",
         "2",
         "-o",
-        str(d / "data.csv"),
+        str(d),
     )
     assert r.returncode == 0, r.stderr
     return d
 
 
 def fit_args(d, name, *extra, steps=400):
+    """An MCMC fit of `short_data` into the directory d/name (result.nc, summary.json, result.chain.h5)."""
     return (
         "fit",
-        str(d / "data.csv"),
+        str(d / "series.csv"),
         "--scene",
         str(SCENES / "roof_frame.toml"),
         "--method",
@@ -160,9 +161,7 @@ def fit_args(d, name, *extra, steps=400):
         str(steps),
         "--no-progress",
         "-o",
-        str(d / f"{name}.nc"),
-        "--summary",
-        str(d / f"{name}.json"),
+        str(d / name),
         *extra,
     )
 

@@ -65,9 +65,65 @@ def _priors(free: Mapping[str, Prior | str] | None, table: dict[str, Any]) -> di
     return out or None
 
 
+def _is_modal(scene: SceneLike | None, model: str | None) -> bool:
+    """No scene, a `{"modal": {...}}` table, or model="modal": the scene-less modal model."""
+    from vibinverse.models.modal import ModalModel
+
+    return scene is None or model == ModalModel.name or (isinstance(scene, Mapping) and "modal" in scene)
+
+
+def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]) -> tuple[dict[str, Any], Any]:
+    """The modal table to fit and the order search behind it (None when the table fixes the whole
+    order): `modes`, `lines`, `drift` and `noise` given in the table are kept, the others chosen
+    by `vibinverse.model_order.choose_order` (stepwise BIC), whose optimum seeds the fit."""
+    from vibinverse.model_order import SEARCHED, choose_order
+
+    table = {"modal": {}} if scene is None else _table(scene, overrides)
+    modal = table.get("modal")
+    if modal is None:
+        modal = table["modal"] = {}
+    if not isinstance(modal, dict):
+        raise InputError("modal: must be a table, e.g. {'modes': 2}")
+    with scene_errors():
+        from vibinverse.models.modal import ModalSpec
+
+        ModalSpec.from_table(table)  # one-line errors before any work
+        if all(k in modal for k in SEARCHED):
+            return table, None
+        order = choose_order(data, table)
+    chosen = order.table()["modal"]
+    table["modal"] = {**chosen, **{k: v for k, v in modal.items() if k in ("values",)}}
+    if "start" in modal:
+        table["modal"]["start"] = {**chosen["start"], **modal["start"]}
+    return table, order
+
+
+def _posterior(
+    series: SeriesLike,
+    scene: SceneLike | None,
+    free: Mapping[str, Prior | str] | None,
+    model: str | None,
+    overrides: Sequence[str],
+) -> tuple[Posterior, Any, bool]:
+    """(posterior, the order search or None, whether the model is the modal model)."""
+    from vibinverse.models.modal import ModalModel
+
+    data = _series(series)
+    order = None
+    modal = _is_modal(scene, model)
+    if modal:
+        table, order = _modal_table(data, scene, overrides)
+        model = ModalModel.name
+    else:
+        table = _table(scene, overrides)
+    with scene_errors():
+        sm = build_model(table, data, model)
+        return Posterior(sm, _priors(free, table)), order, modal
+
+
 def posterior(
     series: SeriesLike,
-    scene: SceneLike,
+    scene: SceneLike | None = None,
     *,
     free: Mapping[str, Prior | str] | None = None,
     model: str | None = None,
@@ -75,17 +131,15 @@ def posterior(
 ) -> Posterior:
     """The posterior of the free parameters (default: the scene's [infer] table, else the model's
     default priors) given `series`; `model` names a registered signal model (default: the one
-    that describes the scene)."""
-    table = _table(scene, overrides)
-    data = _series(series)
-    with scene_errors():
-        sm = build_model(table, data, model)
-        return Posterior(sm, _priors(free, table))
+    that describes the scene). Without a scene, or with a `{"modal": {...}}` table, the modal
+    model (`vibinverse.models.modal`), its order chosen from the data (`vibinverse.model_order`)
+    unless the table fixes it."""
+    return _posterior(series, scene, free, model, overrides)[0]
 
 
 def fit(
     series: SeriesLike,
-    scene: SceneLike,
+    scene: SceneLike | None = None,
     *,
     method: str = "auto",
     free: Mapping[str, Prior | str] | None = None,
@@ -103,6 +157,12 @@ def fit(
     method: spectral | sindy | casadi | map | mcmc | auto (spectral -> SINDy -> casadi -> emcee,
     each seeding the next). `chain` is the emcee checkpoint (HDF5; `resume` continues it); without
     it the sampler checkpoints to a temporary file that is removed afterwards.
+
+    Without a scene (or with a `{"modal": {"modes": 2, ...}}` table) the series is fitted with the
+    modal model: resonances, lines, drift and coloured noise, the order not fixed by the table
+    chosen by BIC (`vibinverse.model_order`); `result.diagnostics["model_order"]` holds the
+    criterion table (each step: what was tried, its BIC, kept or not; [] when the table fixes the
+    order) and `result.data["components"]` the fitted components.
     """
     from vibinverse.pipeline import run
 
@@ -110,9 +170,9 @@ def fit(
         raise InputError("workers and max_steps: must be >= 1")
     if resume and chain is None:
         raise InputError("resume: needs the chain (checkpoint) file of the run to continue")
-    post = posterior(series, scene, free=free, model=model, overrides=overrides)
+    post, order, modal = _posterior(series, scene, free, model, overrides)
     with scene_errors(), tempfile.TemporaryDirectory(prefix="vibinverse-") as tmp:
-        return run(
+        result = run(
             post,
             method,
             seed=seed,
@@ -122,6 +182,12 @@ def fit(
             max_steps=max_steps,
             progress=progress,
         )
+    if modal:
+        result.diagnostics["model_order"] = [] if order is None else order.criterion
+        result.data["components"] = post.model.components(result.point)
+        if order is not None:
+            result.timing["model_order_s"] = order.seconds
+    return result
 
 
 def detect(
@@ -133,11 +199,10 @@ def detect(
     overrides: Sequence[str] = (),
 ) -> list[Detection]:
     """Which lines the data show: the detection test of every line of the model (log-likelihood
-    gain against a 5-sigma threshold with the look-elsewhere term) at the MAP, or of a fit's result."""
+    gain against a 5-sigma threshold with the look-elsewhere term) at the MAP, or of a fit's result.
+    Without a scene: of the modal model's lines and modes, its order chosen from the data."""
     if isinstance(data, FitResult):
         return data.detections
-    if scene is None:
-        raise InputError("detect: a scene is needed to test a series (or pass a FitResult)")
     return fit(data, scene, method="casadi", free=free, model=model, overrides=overrides).detections
 
 

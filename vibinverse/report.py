@@ -1,9 +1,21 @@
-"""`vibinverse report RESULT.nc -o DIR`: one self-contained HTML page (figures embedded as PNG).
+"""`vibinverse report RESULT.nc -o DIR`: one self-contained HTML page that answers the question first.
 
-Every string from the result file (parameter names, priors, diagnostics, timing keys, the data's
-source and description, the SINDy equation) is HTML-escaped, and every number is formatted through
-`_fmt`: a crafted or foreign summary renders as text, never as markup, and never raises. The page
-has no scripts of its own.
+The page, in order: the verdict (each line tested: detected or not, its frequency +- its
+uncertainty, its false-alarm probability; whether the fit can be trusted, from convergence and the
+residual checks: `vibinverse.verdict`), the plain-language warnings, the method and data, the
+parameters (units, long names, priors, 90 % intervals labelled as approximations where they are
+one, and R-hat / bulk ESS / tail ESS from `arviz.summary` for real posterior draws only), then the
+figures: the data under the posterior predictive band with a zoom on the strongest line, the
+standardized residuals and their spectrum, the data folded at each detected line's frequency, the
+PSD of the data under the model's expected PSD, the traces and the corner plot (real draws only);
+last the SINDy equation and every diagnostic.
+
+The page loads nothing (figures are PNG data URIs, no fonts, no scripts) and reads on a phone (a
+viewport, a max width, tables that scroll in their own box). Every string from the result file
+(parameter names, units, priors, diagnostics, timing keys, the data's source and description, the
+SINDy equation) is HTML-escaped (`_text`) or made plain matplotlib text (`_label`), and every
+number is formatted through `format_number`: a crafted or foreign summary renders as text, never as markup,
+and never raises.
 """
 
 from __future__ import annotations
@@ -12,6 +24,7 @@ import base64
 import html
 import io
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -20,17 +33,15 @@ import numpy as np
 from vibinverse.io import jsonio
 from vibinverse.io.atomic import write_all
 from vibinverse.result import detections, read_result
-
-
-def _num(v: Any) -> float:
-    """`v` as a float; NaN for null (a non-finite number in strict JSON) or anything not a number."""
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else math.nan
-
-
-def _fmt(v: Any, spec: str) -> str:
-    """A number formatted by `spec`; "n/a" for NaN, null or anything not a number."""
-    x = _num(v)
-    return "n/a" if math.isnan(x) else format(x, spec)
+from vibinverse.verdict import (
+    Verdict,
+    approximation,
+    approximation_label,
+    as_number,
+    format_number,
+    format_probability,
+    verdict,
+)
 
 
 def _text(v: Any) -> str:
@@ -52,14 +63,126 @@ def _png(fig) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
+def readable_units(units: Any) -> str:
+    """Units as a reader sees them: "arbitrary units" for "1", "arbitrary", "" or none."""
+    u = str(units).strip() if isinstance(units, str) else ""
+    return "arbitrary units" if u in ("", "1", "arbitrary") else u
+
+
+def _squared(units: str) -> str:
+    return f"({units})²" if " " in units or "/" in units else f"{units}²"
+
+
+# ------------------------------------------------------------------ spectra and folding
+
+
+def _on_grid(t: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """(grid index of each sample, step) when the stamps lie on one regular grid, else None."""
+    if t.size < 2:
+        return None
+    dt = float(np.median(np.diff(t)))
+    if not (math.isfinite(dt) and dt > 0):
+        return None
+    k = np.round((t - t[0]) / dt).astype(np.int64)
+    if np.any(np.diff(k) <= 0) or np.max(np.abs(t - (t[0] + k * dt))) > 1e-3 * dt:
+        return None
+    return k, dt
+
+
+def segment_length(n: int) -> int:
+    """Welch's segment: the whole series up to 512 samples, else the power of 2 nearest n / 4 (>= 256)."""
+    if n <= 512:
+        return n
+    return int(min(n, max(256, 2 ** round(math.log2(n / 4)))))
+
+
+def psd(t: np.ndarray, y: np.ndarray, nperseg: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided power spectral density (units²/Hz) of `y` (..., n) sampled at `t` (n), NaN = gap.
+
+    On a regular grid: Welch's average over Hann-windowed segments with 50 % overlap, each
+    segment's gaps set to zero after removing its mean over the samples present, and its
+    periodogram normalized by the window's energy over those samples only, so that white noise of
+    variance s² gives 2 s² dt at every frequency whatever the gaps; segments with less than half
+    their samples are left out. Off a grid: the classical periodogram 2 T / N |sum (y - mean)
+    exp(-2 pi i f t)|² at up to 4000 frequencies to the median step's Nyquist frequency (the same
+    white level). A leading axis of several series (replicates) is handled at once, each series
+    with its own gaps. Returns (frequencies in Hz, PSD with the leading axes of `y`).
+    """
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    grid = _on_grid(t)
+    if grid is None:
+        return _classical(t, y)
+    k, dt = grid
+    n = int(k[-1]) + 1
+    x = np.full(y.shape[:-1] + (n,), np.nan)
+    x[..., k] = y
+    length = min(nperseg or segment_length(n), n)
+    w = np.hanning(length + 2)[1:-1] if length > 2 else np.ones(length)
+    f = np.fft.rfftfreq(length, dt)
+    total = np.zeros(y.shape[:-1] + (f.size,))
+    count = np.zeros(y.shape[:-1] + (1,))
+    for s in range(0, n - length + 1, max(1, length // 2)):
+        seg = x[..., s : s + length]
+        present = np.isfinite(seg)
+        m = present.sum(axis=-1, keepdims=True)
+        use = m >= 0.5 * length
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(present, seg, 0.0).sum(axis=-1, keepdims=True) / np.maximum(m, 1)
+        z = np.where(present, seg - mean, 0.0) * w
+        energy = ((w * present) ** 2).sum(axis=-1, keepdims=True)
+        p = np.abs(np.fft.rfft(z, axis=-1)) ** 2 / (np.maximum(energy, 1e-300) / dt)
+        p[..., 1 : (length + 1) // 2] *= 2.0  # one-sided: every frequency but 0 and Nyquist twice
+        total += np.where(use, p, 0.0)
+        count += use
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(count > 0, total / np.maximum(count, 1), np.nan)
+    return f[1:], out[..., 1:]
+
+
+def _classical(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The classical periodogram of non-uniform samples (see `psd`)."""
+    present = np.isfinite(y)
+    span = float(t[-1] - t[0]) if t.size > 1 else 1.0
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    f = np.linspace(1.0 / span, 0.5 / dt, int(min(4000, max(2, t.size // 2))))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(present, y, 0.0).sum(axis=-1, keepdims=True) / np.maximum(present.sum(-1, keepdims=True), 1)
+    z = np.where(present, y - mean, 0.0)
+    flat = z.reshape(-1, t.size)
+    counts = present.reshape(-1, t.size).sum(axis=1)
+    out = np.empty((flat.shape[0], f.size))
+    for a in range(0, f.size, 256):
+        e = np.exp(-2j * np.pi * np.outer(t, f[a : a + 256]))
+        out[:, a : a + 256] = np.abs(flat @ e) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out *= (2.0 * span / np.maximum(counts, 1) ** 2)[:, None]
+    return f, out.reshape(y.shape[:-1] + (f.size,))
+
+
+def fold(t: np.ndarray, y: np.ndarray, frequency: float, bins: int = 20):
+    """The samples present folded at `frequency`: (bin centres in cycles, mean, standard error, count)."""
+    ok = np.isfinite(y) & np.isfinite(t)
+    phase = np.mod((t[ok] - t[0]) * frequency, 1.0)
+    b = np.minimum((phase * bins).astype(int), bins - 1)
+    n = np.bincount(b, minlength=bins).astype(float)
+    s = np.bincount(b, weights=y[ok], minlength=bins)
+    s2 = np.bincount(b, weights=y[ok] ** 2, minlength=bins)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = s / n
+        var = (s2 - n * mean**2) / np.maximum(n - 1, 1)
+        err = np.sqrt(np.maximum(var, 0.0) / n)
+    return (np.arange(bins) + 0.5) / bins, mean, err, n
+
+
 def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> list[str]:
     """Plain-language warnings an analyst must see before trusting the numbers."""
     out = []
     d = summary["diagnostics"]
     if d.get("converged") is False:
         out.append(
-            f"The sampler has not converged (R-hat {_fmt(d.get('rhat_max'), '.3f')}, run "
-            f"{_fmt(d.get('n_steps'), '.0f')} steps against 50 x tau = {_fmt(50 * _num(d.get('tau_max')), '.0f')}). "
+            f"The sampler has not converged (R-hat {format_number(d.get('rhat_max'), '.3f')}, run "
+            f"{format_number(d.get('n_steps'), '.0f')} steps against 50 x tau = {format_number(50 * as_number(d.get('tau_max')), '.0f')}). "
             "Run longer (--resume --max-steps N)."
         )
     if d.get("hessian_positive_definite") is False:
@@ -77,17 +200,17 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
     for alt in ambiguous if isinstance(ambiguous, list) else []:
         if not isinstance(alt, dict):
             continue
-        where = ", ".join(f"{k} = {_fmt(v, '.5g')}" for k, v in (alt.get("values") or {}).items())
+        where = ", ".join(f"{k} = {format_number(v, '.5g')}" for k, v in (alt.get("values") or {}).items())
         out.append(
             f"The data cannot tell this fit from another reading ({alt.get('alternative')}: {where}), only "
-            f"{_fmt(alt.get('delta_log_posterior'), '.1f')} below in log posterior (5 sigma would be 12.5). "
+            f"{format_number(alt.get('delta_log_posterior'), '.1f')} below in log posterior (5 sigma would be 12.5). "
             "Which line is which is not decided by these data: a longer record or a prior on the resonance decides."
         )
     for det in detections(d):
         if not det.detected:
             out.append(
-                f"No {det.what} is detected: the fit with it is only {_fmt(det.delta_loglike, '.1f')} in "
-                f"log-likelihood above the fit without it (the threshold is {_fmt(det.threshold, '.1f')}: 5 sigma, plus the "
+                f"No {det.what} is detected: the fit with it is only {format_number(det.delta_loglike, '.1f')} in "
+                f"log-likelihood above the fit without it (the threshold is {format_number(det.threshold, '.1f')}: 5 sigma, plus the "
                 "look-elsewhere term of a free frequency). Its numbers below are not a detection."
             )
     if draws is not None and draws.shape[0] > 10:
@@ -102,8 +225,10 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
     for n, p in summary["parameters"].items():
         bounds = p.get("prior_bounds")
         # null bounds: an unbounded prior (strict JSON has no Infinity), read as NaN: no check
-        lo, hi = (_num(b) for b in bounds) if isinstance(bounds, list) and len(bounds) == 2 else (math.nan, math.nan)
-        q05, q95, median = _num(p.get("q05")), _num(p.get("q95")), _num(p.get("median"))
+        lo, hi = (
+            (as_number(b) for b in bounds) if isinstance(bounds, list) and len(bounds) == 2 else (math.nan, math.nan)
+        )
+        q05, q95, median = as_number(p.get("q05")), as_number(p.get("q95")), as_number(p.get("median"))
         if not all(math.isfinite(v) for v in (lo, hi, q05, q95, median)):
             continue
         log = str(p.get("prior", "")).startswith("loguniform")
@@ -120,88 +245,415 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
     return out
 
 
+# ------------------------------------------------------------------ what the result file holds
+
+
+def _real_draws(summary: dict, idata: Any) -> bool:
+    """Whether the result has real posterior draws (a `posterior` group and no approximation)."""
+    return "posterior" in idata.groups() and approximation(summary) is None
+
+
+def _draws(idata: Any, group: str, safe: dict, names: list[str]) -> np.ndarray | None:
+    """(draw, parameter) of `group` (posterior or approximate_posterior), or None."""
+    if group not in idata.groups():
+        return None
+    inv = {v: k for k, v in safe.items()}
+    try:
+        return np.stack([idata[group][inv[n]].values.reshape(-1) for n in names], axis=1)
+    except KeyError:
+        return None
+
+
+def convergence_table(idata: Any, safe: dict, names: list[str]) -> dict[str, dict[str, float]]:
+    """Per parameter r_hat, ess_bulk, ess_tail of `arviz.summary` on the posterior group
+    (rank-normalized split R-hat, chain = walker); {} without one."""
+    if "posterior" not in idata.groups():
+        return {}
+    import arviz as az
+
+    inv = {v: k for k, v in safe.items()}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        table = az.summary(idata.posterior, kind="diagnostics", round_to="none")
+    out = {}
+    for n in names:
+        key = inv.get(n)
+        if key in table.index:
+            row = table.loc[key]
+            out[n] = {k: float(row[k]) for k in ("r_hat", "ess_bulk", "ess_tail")}
+    return out
+
+
+def _replicates(idata: Any, n: int) -> tuple[np.ndarray | None, str | None]:
+    """(replicate series (draw, sample), the approximation they come from or None)."""
+    if "posterior_predictive" not in idata.groups() or "intensity" not in idata.posterior_predictive:
+        return None, None
+    v = idata.posterior_predictive["intensity"]
+    if v.shape[-1] != n or v.size == 0:
+        return None, None
+    a = v.attrs.get("approximation") or idata.posterior_predictive.attrs.get("approximation")
+    return np.asarray(v.values, dtype=float).reshape(-1, n), (str(a) if a else None)
+
+
+def _quantiles(reps: np.ndarray, qs: list[float]) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # all-NaN columns at gaps
+        return np.nanpercentile(reps, qs, axis=0)
+
+
+# ------------------------------------------------------------------ figures
+
+
+def _figures(summary: dict, idata: Any, v: Verdict, names: list[str], safe: dict) -> list[tuple[str, str, str]]:
+    """(title, PNG data URI, caption) of every figure, in the page's order."""
+    import matplotlib.pyplot as plt
+
+    t = np.asarray(idata.constant_data["time"].values, dtype=float)
+    y = np.asarray(idata.observed_data["intensity"].values, dtype=float)
+    cd = idata.constant_data
+    n = y.size
+    units = readable_units(
+        idata.observed_data["intensity"].attrs.get("units") or summary["data"].get("intensity_units")
+    )
+    t_units = str(cd["time"].attrs.get("units") or summary["data"].get("time_units") or "s")
+    ylab = _label(f"intensity ({units})")
+    tlab = _label(f"time ({t_units})")
+    mean = np.asarray(cd["model_mean"].values, dtype=float) if "model_mean" in cd else None
+    reps, rep_approx = _replicates(idata, n)
+    if reps is not None:
+        band = _quantiles(reps, [5, 95])
+        band_label = (
+            "posterior predictive 5-95 %"
+            if rep_approx is None
+            else f"predictive 5-95 % ({approximation_label(rep_approx)})"
+        )
+    elif "model_q05" in cd and "model_q95" in cd:
+        band = np.stack([cd["model_q05"].values, cd["model_q95"].values]).astype(float)
+        band_label = "model mean 5-95 % over the draws"
+    else:
+        band, band_label = None, ""
+    figs: list[tuple[str, str, str]] = []
+    fmin = 1.0 / max(float(t[-1] - t[0]), 1e-300) if n > 1 else math.nan
+
+    # the strongest line: the largest gain among the detected lines with a frequency
+    framed = [ln for ln in v.lines if math.isfinite(ln.value) and ln.value > 0]
+    strongest = max(framed, key=lambda ln: (ln.detected, np.nan_to_num(ln.delta_loglike, nan=-np.inf)), default=None)
+
+    def data_panel(ax, sel, points=False):
+        if band is not None:
+            ax.fill_between(t[sel], band[0][sel], band[1][sel], color="C0", alpha=0.25, lw=0, label=band_label)
+        if points:
+            ax.plot(t[sel], y[sel], ".", ms=3, color="0.25", label="data")
+        else:
+            ax.plot(t[sel], y[sel], lw=0.5, color="0.35", label="data")
+        if mean is not None:
+            ax.plot(t[sel], mean[sel], lw=1.0, color="C3", label="model mean (point estimate)")
+        ax.set(xlabel=tlab, ylabel=ylab)
+
+    rows = 2 if strongest is not None else 1
+    fig, axes = plt.subplots(rows, 1, figsize=(9, 3.2 * rows), constrained_layout=True, squeeze=False)
+    data_panel(axes[0, 0], slice(None))
+    axes[0, 0].set_title("data and the model's predictive band")
+    axes[0, 0].legend(loc="upper right", fontsize=8)
+    caption = f"Data (grey) with the {band_label or 'model mean'}"
+    if strongest is not None:
+        f0 = strongest.value
+        dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+        width = min(max(4.0 / f0, 20 * dt), float(t[-1] - t[0]) or 1.0)
+        mid = 0.5 * (t[0] + t[-1])
+        sel = (t >= mid - width / 2) & (t <= mid + width / 2)
+        data_panel(axes[1, 0], sel, points=True)
+        axes[1, 0].set_title(_label(f"zoom: {width * f0:.3g} periods of the {strongest.label} ({f0:.6g} Hz)"))
+        caption += f"; below, a zoom on a few periods of the strongest line, the {strongest.label}"
+    figs.append(("Data and posterior predictive", _png(fig), caption + "."))
+
+    if "residual" in cd:
+        r = np.asarray(cd["residual"].values, dtype=float)
+        if np.isfinite(r).sum() > 4:
+            fig, axes = plt.subplots(2, 1, figsize=(9, 6), constrained_layout=True)
+            axes[0].plot(t, r, ".", ms=2, color="0.3")
+            for level in (-3, 3):
+                axes[0].axhline(level, color="C3", lw=0.8, ls="--")
+            axes[0].set(xlabel=tlab, ylabel="standardized residual (1)", title="standardized one-step residuals")
+            f, p = psd(t, r)
+            axes[1].semilogy(f, p, lw=0.8, color="0.3", label="residuals")
+            dt = float(np.median(np.diff(t)))
+            axes[1].axhline(2 * dt, color="C3", lw=1.0, ls="--", label="white N(0, 1): 2 dt")
+            axes[1].set(xlabel="frequency (Hz)", ylabel="PSD (1/Hz)", title="residual spectrum")
+            axes[1].legend(loc="upper right", fontsize=8)
+            checks = summary["diagnostics"].get("residual_checks")
+            extra = ""
+            if isinstance(checks, dict) and checks:
+                extra = (
+                    f" Ljung-Box p = {format_number(checks.get('ljung_box_p'), '.2g')} over {format_number(checks.get('lags'), '.0f')} lags, "
+                    f"normality p = {format_number(checks.get('normality_p'), '.2g')}."
+                )
+            figs.append(
+                (
+                    "Residuals",
+                    _png(fig),
+                    "Standardized one-step residuals (innovations) at the point estimate: white, N(0, 1) when the "
+                    "model describes the data (dashed: +-3); their spectrum is then flat at 2 dt." + extra,
+                )
+            )
+
+    folded = [
+        ln for ln in v.lines if ln.detected and math.isfinite(ln.value) and ln.value > 0 and ln.what != "resonance"
+    ]
+    if folded:
+        fig, axes = plt.subplots(len(folded), 1, figsize=(9, 2.8 * len(folded)), constrained_layout=True, squeeze=False)
+        for ax, ln in zip(axes[:, 0], folded):
+            c, m, e, _ = fold(t, y, ln.value)
+            ax.errorbar(c, m, yerr=e, fmt="o", ms=4, color="0.2", capsize=2, label="data, binned mean +- s.e.")
+            if mean is not None:
+                mc, mm = fold(t, mean, ln.value)[:2]
+                ok = np.isfinite(mm)
+                ax.plot(mc[ok], mm[ok], "-", color="C3", lw=1.2, label="model mean, binned")
+            ax.set(
+                xlabel=_label(f"phase at {ln.value:.8g} Hz (cycles)"),
+                ylabel=ylab,
+                title=_label(f"data folded at the {ln.label}'s frequency"),
+            )
+            ax.legend(loc="upper right", fontsize=8)
+        caption = "The data folded at each detected line's frequency, in 20 phase bins (mean +- standard error)."
+        if any(ln.what == "resonance" and ln.detected for ln in v.lines):
+            caption += " A noise-driven resonance has no fixed phase, so it is not folded: its evidence is the PSD."
+        figs.append(("Phase-folded data", _png(fig), caption))
+
+    if n > 8:
+        fig, ax = plt.subplots(figsize=(9, 3.8), constrained_layout=True)
+        f, p = psd(t, y)
+        ax.semilogy(f, p, lw=0.8, color="0.2", label="data")
+        how = "Welch, gaps left out" if _on_grid(t) is not None else "classical periodogram of the irregular samples"
+        caption = f"One-sided PSD of the data ({how}"
+        if reps is not None:
+            fr, pr = psd(t, reps)
+            lo, hi = _quantiles(pr, [5, 95])
+            ax.fill_between(fr, lo, hi, color="C1", alpha=0.25, lw=0, label="replicates 5-95 %")
+            ax.semilogy(fr, np.nanmean(pr, axis=0), color="C1", lw=1.2, label="model: mean replicate PSD")
+            caption += f") and the model's expected PSD: the mean over {reps.shape[0]} posterior predictive replicates, computed the same way"
+            if not np.isfinite(y).all():
+                caption += (
+                    " (with the same gaps, which spread a little of each strong line's power into the floor of both)"
+                )
+        else:
+            caption += "; no posterior predictive replicates in the result, so no model PSD"
+        top = np.nanmax(p) if np.isfinite(p).any() else 1.0
+        for ln in v.lines:
+            if math.isfinite(ln.value) and ln.value > 0:
+                ax.axvline(ln.value, color="C3" if ln.detected else "0.6", ls="--", lw=0.8)
+                ax.text(ln.value, top, " " + _label(ln.label), rotation=90, va="top", fontsize=8)
+        ax.set(xlabel="frequency (Hz)", ylabel=_label(f"PSD ({_squared(units)}/Hz)"), title="power spectral density")
+        if math.isfinite(fmin):
+            ax.set_xlim(left=0)
+        ax.legend(loc="upper right", fontsize=8)
+        figs.append(("Power spectral density", _png(fig), caption + "; dashed: the lines tested (red: detected)."))
+
+    if _real_draws(summary, idata):
+        draws = _draws(idata, "posterior", safe, names)
+        params = summary["parameters"]
+        labels = [
+            _label(
+                f"{n.split('.')[-1]} ({params[n].get('units')})"
+                if isinstance(params[n].get("units"), str)
+                else n.split(".")[-1]
+            )
+            for n in names
+        ]
+        inv = {val: k for k, val in safe.items()}
+        fig, axes = plt.subplots(
+            len(names), 1, figsize=(9, 1.4 * len(names) + 0.6), sharex=True, constrained_layout=True
+        )
+        for ax, nm, lab in zip(np.atleast_1d(axes), names, labels):
+            ax.plot(idata.posterior[inv[nm]].values.T, lw=0.3, alpha=0.6)
+            ax.set_ylabel(lab, fontsize=7)
+        np.atleast_1d(axes)[-1].set_xlabel("draw (after burn-in)")
+        figs.append(("Traces", _png(fig), "Every walker's draws of every parameter: stationary, overlapping chains."))
+        if draws is not None and draws.shape[0] > draws.shape[1]:
+            import corner
+
+            truths = [as_number(p.get("truth")) for p in params.values()]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                fig = corner.corner(
+                    draws,
+                    labels=labels,
+                    quantiles=[0.05, 0.5, 0.95],
+                    truths=truths if all(math.isfinite(x) for x in truths) else None,
+                )
+            figs.append(("Corner plot", _png(fig), "Pairwise posterior; dashed: 5, 50 and 95 % quantiles."))
+    return figs
+
+
+# ------------------------------------------------------------------ the page
+
+CSS = """
+*{box-sizing:border-box}
+html{-webkit-text-size-adjust:100%}
+body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,"Helvetica Neue",Arial,sans-serif;line-height:1.45;
+ color:#1d1d1f;background:#fff;max-width:1000px;margin:0 auto;padding:12px;overflow-wrap:anywhere}
+h1{font-size:1.35em;margin:.1em 0 .4em}h2{font-size:1.2em;margin:1.4em 0 .4em;border-bottom:1px solid #ddd}
+.verdict{border:2px solid #888;border-radius:10px;padding:.6em .9em;margin:0 0 1em;background:#f7f7f9}
+.verdict.yes{border-color:#2e7d32;background:#f1f8f1}.verdict.no{border-color:#c62828;background:#fdf2f2}
+.verdict.unknown{border-color:#b7791f;background:#fffaf0}
+.kicker{margin:0;font-size:.85em;color:#555}
+.lines{list-style:none;padding:0;margin:.2em 0}.lines li{margin:.25em 0;padding-left:1.5em;text-indent:-1.5em}
+.mark{display:inline-block;width:1.3em;text-indent:0;font-weight:bold}
+.det .mark{color:#2e7d32}.nodet .mark{color:#777}
+.fap{color:#555;font-size:.9em}
+.trust{margin:.5em 0 .1em}.trust ul{margin:.2em 0 0 1.2em;padding:0;font-size:.9em}
+.warn{background:#fff3cd;border:1px solid #e0c060;border-radius:6px;padding:.5em .7em;margin:.4em 0}
+.table-wrap{overflow-x:auto;max-width:100%;-webkit-overflow-scrolling:touch;margin:.3em 0}
+table{border-collapse:collapse;font-size:.9em;overflow-wrap:normal}
+td,th{border:1px solid #ccc;padding:3px 7px;text-align:right;vertical-align:top;white-space:nowrap}
+td:first-child,th:first-child{text-align:left}
+td.name{white-space:normal;min-width:12em}td.name code{font-size:.8em;color:#555;white-space:nowrap}
+.val{white-space:nowrap}
+td.diag{white-space:normal;text-align:left;overflow-wrap:anywhere;max-width:40em}
+td.prior,th.prior{text-align:left;white-space:normal;min-width:9em}
+.note{font-size:.9em;color:#444}
+figure{margin:1em 0}img{max-width:100%;height:auto;display:block}figcaption{font-size:.9em;color:#444}
+code{overflow-wrap:anywhere}
+"""
+
+
+def _verdict_html(v: Verdict, summary: dict) -> str:
+    cls = {True: "yes", False: "no", None: "unknown"}[v.trusted]
+    answer = {True: "Yes", False: "No", None: "Not decided"}[v.trusted]
+    items = []
+    for ln in v.lines:
+        where = ln.where("±")
+        value = f'at <span class="val">{_text(where[3:])}</span>' if where else ""  # "at " + value
+        unc = f" ({ln.uncertainty_kind})" if where and ln.uncertainty_kind else ""
+        fap = (
+            f'<span class="fap">false-alarm probability {_text(format_probability(ln.false_alarm_probability))}; '
+            f"log-likelihood gain {format_number(ln.delta_loglike, '.1f')} against a threshold of {format_number(ln.threshold, '.1f')}</span>"
+        )
+        if ln.detected:
+            items.append(
+                f'<li class="det"><span class="mark">✔</span><b>{_text(ln.label)}</b> detected'
+                f"{' ' + value + _text(unc) if where else ''}. {fap}</li>"
+            )
+        else:
+            at = f" (best fit {value})" if where else ""
+            items.append(
+                f'<li class="nodet"><span class="mark">✘</span><b>{_text(ln.label)}</b> not detected{at}. {fap}</li>'
+            )
+    lines = f'<ul class="lines">{"".join(items)}</ul>' if items else "<p>No line was tested.</p>"
+    reasons = "".join(f"<li>{_text(r)}</li>" for r in v.reasons)
+    method = _text(summary.get("method", ""))
+    approx = approximation_label(approximation(summary))
+    return (
+        f'<section class="verdict {cls}" id="verdict">'
+        f'<p class="kicker">vibinverse fit report · method {method}{" · " + _text(approx) if approx else ""}</p>'
+        f"<h1>Verdict</h1>{lines}"
+        f'<div class="trust"><b>Can this be trusted? {answer}.</b><ul>{reasons}</ul></div>'
+        "</section>"
+    )
+
+
+def _parameters_html(summary: dict, idata: Any, safe: dict, names: list[str]) -> str:
+    params = summary["parameters"]
+    kind = approximation(summary)
+    real = _real_draws(summary, idata)
+    conv = convergence_table(idata, safe, names) if real else {}
+    show_conv = kind is None and (
+        bool(conv) or any(as_number(p.get("rhat")) == as_number(p.get("rhat")) for p in params.values())
+    )
+    truth = any(p.get("truth") is not None for p in params.values())
+    interval = "90 % interval" if kind is None else f"90 % interval ({_text(approximation_label(kind))})"
+    head = ["parameter", "units", "prior", "median", interval, "sd", "MAP"]
+    head += ["truth"] if truth else []
+    head += ["R-hat", "ESS bulk", "ESS tail"] if show_conv else []
+    cell = lambda v: format_number(v, ".5g")
+    rows = []
+    for n, p in params.items():
+        long_name = p.get("long_name")
+        code = f"<code>{_text(n)}</code>"
+        name = f"{_text(long_name)}<br>{code}" if isinstance(long_name, str) and long_name else code
+        cells = [
+            f'<td class="name">{name}</td>',
+            f"<td>{_text(p.get('units', '')) if p.get('units') is not None else ''}</td>",
+            f'<td class="prior">{_text(p.get("prior", ""))}</td>',
+            f"<td>{cell(p.get('median'))}</td>",
+            f"<td>{cell(p.get('q05'))} .. {cell(p.get('q95'))}</td>",
+            f"<td>{cell(p.get('sd'))}</td>",
+            f"<td>{cell(p.get('map'))}</td>",
+        ]
+        if truth:
+            cells.append(f"<td>{'' if p.get('truth') is None else cell(p.get('truth'))}</td>")
+        if show_conv:
+            c = conv.get(n, {"r_hat": p.get("rhat"), "ess_bulk": p.get("ess_bulk"), "ess_tail": p.get("ess_tail")})
+            cells += [
+                f'<td class="rhat">{format_number(c.get("r_hat"), ".3f")}</td>',
+                f'<td class="ess-bulk">{format_number(c.get("ess_bulk"), ".0f")}</td>',
+                f'<td class="ess-tail">{format_number(c.get("ess_tail"), ".0f")}</td>',
+            ]
+        rows.append(f"<tr>{''.join(cells)}</tr>")
+    if kind is None:
+        n_draws = ""
+        if "posterior" in idata.groups():
+            post = idata.posterior
+            n_draws = f" of {post.sizes.get('chain', 1)} walkers x {post.sizes.get('draw', 0)} draws"
+        note = (
+            f"Median and 90 % interval (5-95 % quantiles) of the posterior draws{n_draws}. R-hat: rank-normalized "
+            "split R-hat (want <= 1.01); ESS: bulk and tail effective sample sizes (want >= 400), by arviz.summary."
+        )
+    else:
+        note = (
+            f"No sampler: the intervals are a {approximation_label(kind)}, not quantiles of posterior draws, "
+            "so there is no R-hat or ESS. Run --method mcmc for a posterior."
+        )
+    return (
+        '<section id="parameters"><h2>Parameters</h2><div class="table-wrap"><table><tr>'
+        + "".join(f'<th class="prior">{h}</th>' if h == "prior" else f"<th>{h}</th>" for h in head)
+        + "</tr>"
+        + "".join(rows)
+        + f'</table></div><p class="note">{_text(note)}</p></section>'
+    )
+
+
+def _diagnostic(v: Any) -> str:
+    """A diagnostic value as escaped text: numbers to 6 significant digits, objects as key: value."""
+    if isinstance(v, bool) or v is None or isinstance(v, str):
+        return _text(v)
+    if isinstance(v, (int, float)):
+        return format_number(v, ".6g")
+    if isinstance(v, dict):
+        return ", ".join(f"{_text(k)}: {_diagnostic(x)}" for k, x in v.items())
+    if isinstance(v, list):
+        return "; ".join(_diagnostic(x) for x in v)
+    return _text(v)
+
+
 def write_report(result: Path, outdir: Path) -> Path:
+    """Write `outdir/report.html` for the result netCDF `result`; returns its path."""
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     summary, idata = read_result(result)
     names = list(summary["parameters"])
     safe = jsonio.loads(idata.observed_data.attrs.get("parameter_names", "{}"))
-    draws = None
-    if hasattr(idata, "posterior"):
-        post = idata.posterior
-        inv = {v: k for k, v in safe.items()}
-        draws = np.stack([post[inv[n]].values.reshape(-1) for n in names], axis=1)
-    t = idata.constant_data["time"].values
-    y = idata.observed_data["intensity"].values
-    cd = idata.constant_data
-    figs = {}
+    safe = safe if isinstance(safe, dict) else {}
+    v = verdict(summary)
+    group = "posterior" if "posterior" in idata.groups() else "approximate_posterior"
+    draws = _draws(idata, group, safe, names)
+    figs = _figures(summary, idata, v, names, safe)
 
-    fig, ax = plt.subplots(figsize=(9, 3.5), constrained_layout=True)
-    ax.plot(t, y, lw=0.5, color="0.5", label="data")
-    if "model_mean" in cd:
-        ax.plot(t, cd["model_mean"].values, lw=1.0, color="C0", label="model mean")
-    if "model_q05" in cd and "model_q95" in cd:
-        ax.fill_between(t, cd["model_q05"].values, cd["model_q95"].values, color="C0", alpha=0.3, label="5-95 %")
-    ax.set(xlabel="time (s)", ylabel="intensity", title="posterior predictive mean over the data")
-    ax.legend(loc="upper right")
-    figs["Posterior predictive"] = _png(fig)
-
-    good = np.isfinite(y)
-    fig, ax = plt.subplots(figsize=(9, 3.5), constrained_layout=True)
-    dt = np.median(np.diff(t))
-    filled = np.where(good, y - np.nanmean(y), 0.0)
-    f = np.fft.rfftfreq(4 * filled.size, dt)[1:]
-    pw = (np.abs(np.fft.rfft(filled, 4 * filled.size)) ** 2)[1:]
-    ax.semilogy(f, pw, lw=0.6)
-    for n, p in summary["parameters"].items():
-        if n.split("[")[0].endswith("frequency") and math.isfinite(_num(p["median"])):
-            ax.axvline(p["median"], color="C3", ls="--", lw=0.8)
-            ax.text(p["median"], pw.max(), " " + _label(n.split(".")[-1]), rotation=90, va="top", fontsize=8)
-    ax.set(xlabel="frequency (Hz)", ylabel="power", title="periodogram with the identified lines")
-    figs["Periodogram"] = _png(fig)
-
-    if draws is not None and draws.shape[0] > draws.shape[1]:
-        import corner
-
-        fig = corner.corner(
-            draws,
-            labels=[_label(n.split(".")[-1]) for n in names],
-            quantiles=[0.05, 0.5, 0.95],
-            truths=[p["truth"] for p in summary["parameters"].values()]
-            if all(p["truth"] is not None for p in summary["parameters"].values())
-            else None,
-        )
-        figs["Corner plot"] = _png(fig)
-        if summary["method"] in ("mcmc", "auto"):
-            fig, axes = plt.subplots(len(names), 1, figsize=(9, 1.4 * len(names)), sharex=True, constrained_layout=True)
-            inv = {v: k for k, v in safe.items()}
-            for ax, n in zip(np.atleast_1d(axes), names):
-                ax.plot(idata.posterior[inv[n]].values.T, lw=0.3, alpha=0.6)
-                ax.set_ylabel(_label(n.split(".")[-1]), fontsize=8)
-            np.atleast_1d(axes)[-1].set_xlabel("step (after burn-in)")
-            figs["Traces"] = _png(fig)
-
-    rows = []
-    for n, p in summary["parameters"].items():
-        cell = lambda v: "" if v is None else _fmt(v, ".6g")
-        rows.append(
-            f"<tr><td>{_text(n)}</td><td>{cell(p['median'])}</td><td>{cell(p['q05'])} .. {cell(p['q95'])}</td>"
-            f"<td>{cell(p['sd'])}</td><td>{cell(p['map'])}</td><td>{cell(p['truth'])}</td></tr>"
-        )
     warn = warnings_for(summary, draws, names)
     diag = "".join(
-        f"<tr><td>{_text(k)}</td><td>{_text(v)}</td></tr>" for k, v in summary["diagnostics"].items() if k != "sindy"
+        f'<tr><td>{_text(k)}</td><td class="diag">{_diagnostic(val)}</td></tr>'
+        for k, val in summary["diagnostics"].items()
+        if k != "sindy"
     )
     sindy = summary["diagnostics"].get("sindy")
     if not isinstance(sindy, dict):
         equation = ""
     elif sindy.get("status") == "ok":
         equation = (
-            f"<h2>Identified equation (SINDy)</h2><p><code>{_text(sindy.get('equation', ''))}</code> "
-            f"(free-response misfit to the correlation function {_fmt(sindy.get('misfit'), '.0%')}).</p>"
+            f'<section id="equation"><h2>Identified equation (SINDy)</h2><p><code>{_text(sindy.get("equation", ""))}</code> '
+            f"(free-response misfit to the correlation function {format_number(sindy.get('misfit'), '.0%')}).</p>"
             + (
                 "<p>SINDy's damping ratio is a seed, not an answer: its jackknife sd covered the truth in only "
                 "65-75 % of the estimator bench's runs where 90 % was due. The MAP and the posterior are "
@@ -209,22 +661,27 @@ def write_report(result: Path, outdir: Path) -> Path:
                 if summary["method"] == "sindy"
                 else ""
             )
+            + "</section>"
         )
     else:
-        equation = f"<h2>Identified equation (SINDy)</h2><p>Declined: {_text(sindy.get('reason', ''))}</p>"
-    timing = ", ".join(f"{_text(k)} {_fmt(v, '.2f')} s" for k, v in summary["timing"].items())
+        equation = f'<section id="equation"><h2>Identified equation (SINDy)</h2><p>Declined: {_text(sindy.get("reason", ""))}</p></section>'
+    timing = ", ".join(f"{_text(k)} {format_number(val, '.2f')} s" for k, val in summary["timing"].items())
     data = summary["data"]
-    body = f"""<!doctype html><html><head><meta charset="utf-8"><title>vibinverse report</title>
-<style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto}}table{{border-collapse:collapse}}
-td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}td:first-child{{text-align:left}}
-.warn{{background:#fff3cd;border:1px solid #e0c060;padding:.6em;margin:.4em 0}}</style></head><body>
-<h1>vibinverse fit report</h1>
-<p>Method: <b>{_text(summary["method"])}</b>. Data: {_text(data.get("description", ""))} ({_text(data.get("source", ""))}). Timing: {timing}.</p>
-{"".join(f'<div class="warn">{_text(w)}</div>' for w in warn) or "<p>No warnings.</p>"}
-<h2>Parameters</h2><table><tr><th>parameter</th><th>median</th><th>90 % interval</th><th>sd</th><th>MAP</th><th>truth</th></tr>
-{"".join(rows)}</table>
-{equation}<h2>Diagnostics</h2><table>{diag}</table>
-{"".join(f'<h2>{_text(k)}</h2><img src="{_text(v)}" style="max-width:100%">' for k, v in figs.items())}
+    units = readable_units(data.get("intensity_units"))
+    figures = "".join(
+        f'<figure id="fig-{i}"><h2>{_text(title)}</h2><img src="{_text(uri)}" alt="{_text(title)}">'
+        f"<figcaption>{_text(caption)}</figcaption></figure>"
+        for i, (title, uri, caption) in enumerate(figs)
+    )
+    body = f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
+<title>vibinverse report</title><style>{CSS}</style></head><body>
+{_verdict_html(v, summary)}
+<section id="warnings"><h2>Warnings</h2>{"".join(f'<div class="warn">{_text(w)}</div>' for w in warn) or "<p>No warnings.</p>"}</section>
+<section id="about"><h2>Method and data</h2><p>Method: <b>{_text(summary["method"])}</b>. Data: {_text(data.get("description", ""))} ({_text(data.get("source", ""))}); intensity in {_text(units)}, time in {_text(data.get("time_units") or "s")}. Timing: {timing}.</p></section>
+{_parameters_html(summary, idata, safe, names)}
+{figures}
+{equation}<section id="diagnostics"><h2>Diagnostics</h2><div class="table-wrap"><table>{diag}</table></div></section>
 </body></html>"""
     path = outdir / "report.html"
     write_all({path: lambda p: p.write_text(body, encoding="utf-8")})

@@ -37,7 +37,11 @@ class FitResult:
     jackknife) standard deviations when there is no sampler; `chains` real posterior draws
     (walker, draw, parameter) in value units; `approximate_draws` draws of the Laplace
     approximation (draw, parameter); `z`, `cov_z` the point and covariance in the samplers'
-    unconstrained space; `starts` the candidate starting points the next stage may use, best first.
+    unconstrained space; `starts` the candidate starting points the next stage may use, best first;
+    `approximation` what the intervals are without real draws ("laplace", "jackknife", "spectral");
+    `units` (units, long name) per parameter; `pointwise` the pointwise log-likelihood and
+    replicate series (chain, draw, sample) of a thinned subset of the draws, with the `draw`
+    indices kept (`vibinverse.estimators.base.pointwise`).
     """
 
     method: str
@@ -58,6 +62,9 @@ class FitResult:
     data: dict[str, Any] = field(default_factory=dict)
     truth: dict[str, float | None] = field(default_factory=dict)
     predictive: dict[str, np.ndarray] = field(default_factory=dict)
+    approximation: str | None = None
+    units: dict[str, tuple[str, str]] = field(default_factory=dict)
+    pointwise: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def draws(self) -> np.ndarray | None:
@@ -70,13 +77,16 @@ class FitResult:
         return detections(self.diagnostics)
 
     def summary(self) -> dict[str, Any]:
-        """The JSON summary: per parameter median, mean, sd, q05, q95, map, truth, prior.
+        """The JSON summary: per parameter median, mean, sd, q05, q95, map, truth, prior, units,
+        long name, and with posterior draws the rank-normalized split R-hat and the bulk and tail
+        ESS (`convergence`); `approximation` says what the intervals are without draws.
 
         With posterior draws the numbers are their quantiles; without them (spectral, SINDy, MAP)
         the interval is the Laplace approximation's, formed in the unconstrained space
         (`_approximate_interval`), or null without an sd.
         """
         draws = self.draws
+        convergence = self.convergence()
         params = {}
         for j, n in enumerate(self.names):
             if draws is not None:
@@ -93,15 +103,39 @@ class FitResult:
             entry["map"] = self.point[n]
             entry["truth"] = self.truth.get(n)
             params[n] = {k: (None if v is None else float(v)) for k, v in entry.items()}
+            params[n].update({k: convergence.get(n, {}).get(k) for k in ("rhat", "ess_bulk", "ess_tail")})
             params[n]["prior"] = str(self.priors[j])
             params[n]["prior_bounds"] = [float(b) for b in self.priors[j].bounds]
+            params[n]["units"], params[n]["long_name"] = self.units.get(n, ("1", n.split(".")[-1]))
         return {
             "method": self.method,
+            "approximation": self.approximation if self.chains is None else None,
             "parameters": params,
             "diagnostics": self.diagnostics,
             "timing": self.timing,
             "data": self.data,
         }
+
+    def convergence(self) -> dict[str, dict[str, float]]:
+        """Per parameter the rank-normalized split R-hat and the bulk and tail ESS of the posterior
+        draws (ArviZ, chain = walker; the numbers `arviz.summary` gives); {} without draws."""
+        if self.chains is None:
+            return {}
+        cached = getattr(self, "_convergence", None)
+        if cached is not None and cached[0] is self.chains:
+            return cached[1]
+        import arviz as az
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ds = az.convert_to_dataset({f"p{j}": self.chains[..., j] for j in range(len(self.names))})
+            rhat, bulk, tail = az.rhat(ds, method="rank"), az.ess(ds, method="bulk"), az.ess(ds, method="tail")
+        out = {
+            n: {"rhat": float(rhat[f"p{j}"]), "ess_bulk": float(bulk[f"p{j}"]), "ess_tail": float(tail[f"p{j}"])}
+            for j, n in enumerate(self.names)
+        }
+        self._convergence = (self.chains, out)
+        return out
 
     def _approximate_interval(self, j: int, m: float, s: float) -> tuple[float, float]:
         """The 90 % interval without draws: of the Laplace approximation in the samplers'
@@ -117,38 +151,77 @@ class FitResult:
         return max(m - 1.645 * s, lo), min(m + 1.645 * s, hi)
 
     def to_inference_data(self) -> Any:
-        """ArviZ InferenceData: posterior (chain = walker, draw; without a sampler one 'chain' of
-        Laplace draws), sample_stats (lp), observed_data, constant_data (time and the predictive
-        bands), and the JSON summary in the observed data's attributes (strict JSON: a non-finite
-        number is null there, named in its "non_finite" record; `read_result` restores it)."""
-        import arviz as az
+        """ArviZ InferenceData with CF-style `units` and `long_name` on every variable:
 
-        chains = (
-            self.chains
-            if self.chains is not None
-            else (None if self.approximate_draws is None else self.approximate_draws[None, ...])
-        )
-        posterior = None if chains is None else {_safe(n): chains[..., j] for j, n in enumerate(self.names)}
+        - `posterior`: real posterior draws only (chain = walker, draw); the draws of an
+          approximation (Laplace) go to `approximate_posterior` instead, labelled;
+        - `log_likelihood` and `posterior_predictive` (variable `intensity`): the pointwise
+          log-likelihood and a replicate series of an evenly thinned subset of the draws (their
+          `draw` coordinate holds the indices kept), so that `az.loo` and `az.compare` work;
+        - `sample_stats` (lp), `observed_data` (intensity), `constant_data` (time in seconds since
+          the first sample's reference, the predictive band, the standardized residuals);
+        - the JSON summary in the observed data's attributes (strict JSON: a non-finite number is
+          null there, named in its "non_finite" record; `read_result` restores it).
+        """
+        import arviz as az
+        import xarray as xr
+
+        series = self.series
+        names = [_safe(n) for n in self.names]
+        units = {_safe(n): self.units.get(n, ("1", n.split(".")[-1])) for n in self.names}
+        intensity_units = str(self.data.get("intensity_units", "1"))
         attrs = {
             "vibinverse_summary": jsonio.dumps(self.summary()),
             "parameter_names": jsonio.dumps({_safe(n): n for n in self.names}),
         }
-        series = self.series
+        groups: dict[str, Any] = {}
+        if self.chains is not None:
+            groups["posterior"] = _draws(self.chains, names, units)
+        elif self.approximate_draws is not None:
+            groups["approximate_posterior"] = _draws(self.approximate_draws[None], names, units)
+            groups["approximate_posterior"].attrs["approximation"] = str(self.approximation or "laplace")
+        if self.log_prob is not None:
+            groups["sample_stats"] = xr.Dataset({"lp": (("chain", "draw"), np.asarray(self.log_prob))})
+        n = series.time.size
+        sample = {"time_index": np.arange(n)}
+        if self.pointwise:
+            coords = {"chain": np.arange(self.pointwise["log_likelihood"].shape[0]), "draw": self.pointwise["draw"]}
+            coords.update(sample)
+            dims = ("chain", "draw", "time_index")
+            groups["log_likelihood"] = xr.Dataset(
+                {"intensity": (dims, self.pointwise["log_likelihood"], _cf("1", "pointwise log-likelihood"))},
+                coords=coords,
+            )
+            groups["posterior_predictive"] = xr.Dataset(
+                {"intensity": (dims, self.pointwise["replicates"], _cf(intensity_units, "replicate intensity"))},
+                coords=coords,
+            )
+            if self.chains is None:
+                for g in ("log_likelihood", "posterior_predictive"):
+                    groups[g].attrs["approximation"] = str(self.approximation or "laplace")
+        groups["observed_data"] = xr.Dataset(
+            {"intensity": ("time_index", series.intensity, _cf(intensity_units, "pixel intensity"))},
+            coords=sample,
+            attrs=attrs,
+        )
+        time_attrs = _cf("s", "time")
+        reference = self.data.get("time_reference")
+        if reference:
+            time_attrs["reference"] = str(reference)
+        constant = {"time": ("time_index", series.time, time_attrs)}
+        long_names = {
+            "model_mean": ("model mean at the point estimate", intensity_units),
+            "model_q05": ("model mean, 5 % quantile over the draws", intensity_units),
+            "model_q95": ("model mean, 95 % quantile over the draws", intensity_units),
+            "residual": ("standardized one-step residual at the point estimate", "1"),
+        }
+        for k, v in self.predictive.items():
+            long_name, u = long_names.get(k, (k, intensity_units))
+            constant[k] = ("time_index", v, _cf(u, long_name))
+        groups["constant_data"] = xr.Dataset(constant, coords=sample)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return az.from_dict(
-                posterior=posterior,
-                sample_stats={"lp": self.log_prob} if self.log_prob is not None else None,
-                observed_data={"intensity": series.intensity},
-                constant_data={"time": series.time, **self.predictive},
-                coords={"time_index": np.arange(series.time.size)},
-                dims={
-                    "intensity": ["time_index"],
-                    "time": ["time_index"],
-                    **{k: ["time_index"] for k in self.predictive},
-                },
-                attrs=attrs,
-            )
+            return az.InferenceData(**groups)
 
     def to_netcdf(self, path: str | Path) -> Path:
         """Write `to_inference_data()` as netCDF (h5netcdf); opens with `arviz.from_netcdf`."""
@@ -274,6 +347,21 @@ def _short(v: Any) -> str:
 def _hdf5_reason(exc: BaseException) -> str:
     text = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
     return re.sub(r"^\[Errno \d+\] ", "", re.sub(r"^Unable to synchronously open file \((.*)\)$", r"\1", text))
+
+
+def _cf(units: str, long_name: str) -> dict[str, str]:
+    return {"units": units, "long_name": long_name}
+
+
+def _draws(chains: np.ndarray, names: list[str], units: dict[str, tuple[str, str]]) -> Any:
+    """(chain, draw, parameter) draws as a Dataset, one variable per parameter, with units."""
+    import xarray as xr
+
+    c, d, _ = chains.shape
+    return xr.Dataset(
+        {n: (("chain", "draw"), chains[..., j], _cf(*units[n])) for j, n in enumerate(names)},
+        coords={"chain": np.arange(c), "draw": np.arange(d)},
+    )
 
 
 def _safe(name: str) -> str:

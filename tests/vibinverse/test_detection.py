@@ -1,6 +1,14 @@
 """Detection, not invention: a weak or absent line is not reported as detected."""
 
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
 from tests.conftest import SNR10, fitted, frame_problem, simulate
+from vibinverse.detection import line_detection
+from vibinverse.io.series import Series
+from vibinverse.models.base import LineTest
 from vibinverse.pipeline import run
 
 
@@ -26,3 +34,118 @@ def test_a_vibration_absent_from_the_data_is_not_detected():
     _, summary = fitted(table, series)
     d = summary["diagnostics"]
     assert not d["vibration_detected"] and d["vibration_delta_loglike"] < d["vibration_threshold"]
+
+
+# ------------------------------------------------------------------ the false-alarm probability
+
+
+class _Sinusoid:
+    """A sinusoid of free frequency, amplitude and phase in white noise of known sd 1: the test the
+    detection module prices, with an exact global maximum of the likelihood over the frequency."""
+
+    def __init__(self, series):
+        self.series = series
+
+    def log_likelihood(self, v):
+        t, y = self.series.time, self.series.intensity
+        r = (y - v["a"] * np.cos(2 * np.pi * v["f"] * t + v["phi"]))[np.isfinite(y)]
+        return -0.5 * float(r @ r)
+
+    def line_tests(self, values, free):
+        return [LineTest("line", {"a": 0.0}, "f" if "f" in free else None)]
+
+    def fit_at(self, f):
+        """(gain, values) of the least-squares sinusoid at frequency f."""
+        t, y = self.series.time, self.series.intensity
+        ok = np.isfinite(y)
+        x = np.stack([np.cos(2 * np.pi * f * t[ok]), -np.sin(2 * np.pi * f * t[ok])], axis=1)
+        c, *_ = np.linalg.lstsq(x, y[ok], rcond=None)
+        return 0.5 * float(y[ok] @ x @ c), {"f": f, "a": float(np.hypot(*c)), "phi": float(np.arctan2(c[1], c[0]))}
+
+    def fit(self, lo, hi):
+        """The global maximum over [lo, hi]: a grid 10 x finer than the Fourier spacing (every
+        frequency's 2 x 2 least squares at once), then refined around the best."""
+        from scipy.optimize import minimize_scalar
+
+        t, y = self.series.time, self.series.intensity
+        ok = np.isfinite(y)
+        span = t[-1] - t[0] + self.series.dt
+        grid = np.linspace(lo, hi, int(10 * (hi - lo) * span) + 1)
+        w = 2 * np.pi * np.outer(grid, t[ok])
+        c, s = np.cos(w), -np.sin(w)
+        b = np.stack([c @ y[ok], s @ y[ok]], axis=1)
+        g = np.stack([(c * c).sum(1), (c * s).sum(1), (s * s).sum(1)], axis=1)
+        det = g[:, 0] * g[:, 2] - g[:, 1] ** 2
+        gain = 0.5 * (g[:, 2] * b[:, 0] ** 2 - 2 * g[:, 1] * b[:, 0] * b[:, 1] + g[:, 0] * b[:, 1] ** 2) / det
+        best, step = grid[int(np.argmax(gain))], grid[1] - grid[0]
+        r = minimize_scalar(
+            lambda f: -self.fit_at(f)[0], bounds=(max(lo, best - step), min(hi, best + step)), method="bounded"
+        )
+        return self.fit_at(float(r.x))[1]
+
+
+def _noise_posterior(seed, n=256, lo=5.0, hi=45.0, gaps=0.0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.01
+    y = rng.normal(size=n)
+    if gaps:
+        y[rng.random(n) < gaps] = np.nan
+    model = _Sinusoid(Series(t, y, f"noise {seed}"))
+    names = ["f", "a", "phi"]
+    post = SimpleNamespace(model=model, series=model.series, space=SimpleNamespace(names=names), bounds={"f": (lo, hi)})
+    return post, model.fit(lo, hi)
+
+
+def test_false_alarm_probability_is_calibrated_on_pure_noise():
+    """Of 300 pure-noise records (fixed seeds, 20 % gaps in a third), each searched over a 40 Hz
+    prior (~100 independent frequencies) for the best sinusoid, those with p < 0.05 are at most
+    5 % within binomial tolerance (3 sd), and p is not vacuous (small p's occur)."""
+    ps, gains = [], []
+    for seed in range(300):
+        post, values = _noise_posterior(seed, gaps=0.2 if seed % 3 == 0 else 0.0)
+        d = line_detection(post, values)
+        assert not d["line_detected"]
+        ps.append(d["line_false_alarm_probability"])
+        gains.append(d["line_delta_loglike"])
+    ps, gains = np.array(ps), np.array(gains)
+    tolerance = 0.05 + 3 * np.sqrt(0.05 * 0.95 / ps.size)
+    assert np.all((ps > 0) & (ps <= 1))
+    assert np.mean(ps < 0.05) <= tolerance
+    assert np.mean(ps < 0.25) >= 0.1  # an honest bound, not 1 everywhere
+    # Bonferroni over the threshold's N Fourier bins alone (N exp(-gain)) misses the peaks between
+    # them: too many false alarms, the reason for Davies' sqrt(gain) term
+    assert np.mean(np.minimum(1.0, 40 * 2.56 * np.exp(-gains)) < 0.05) > tolerance
+
+
+def test_false_alarm_probability_at_a_fixed_frequency_is_exp_minus_gain():
+    post, values = _noise_posterior(1)
+    post.space.names = ["a", "phi"]  # the frequency held: no look-elsewhere factor
+    d = line_detection(post, values)
+    assert d["line_false_alarm_probability"] == pytest.approx(np.exp(-max(d["line_delta_loglike"], 0.0)))
+
+
+def test_a_strong_line_has_a_tiny_false_alarm_probability():
+    post, _ = _noise_posterior(2)
+    t = post.series.time
+    post.series.intensity[:] += 1.0 * np.cos(2 * np.pi * 17.3 * t)  # amplitude 1 in sd 1 over 256 samples
+    d = line_detection(post, post.model.fit(5.0, 45.0))
+    assert d["line_detected"] and d["line_false_alarm_probability"] < 1e-10
+
+
+@pytest.mark.slow
+def test_false_alarm_probability_of_the_pipeline_on_noise_only_frames():
+    """The real pipeline (MAP) on 24 noise-only frame records: the drive line's and the resonance's
+    p < 0.05 in at most ~5 % of them (binomial, 3 sd)."""
+    ps = []
+    for seed in range(24):
+        prob = frame_problem(
+            "surfaces.roof.motion.drive_amplitude=[0.0]",
+            "surfaces.roof.motion.noise_rms=0",
+            "noise.sigma=0.05",
+            "sampling.duration=5",
+            seed=seed,
+        )
+        d = run(prob, "map").summary()["diagnostics"]
+        ps += [d["drive_false_alarm_probability"], d["resonance_false_alarm_probability"]]
+    ps = np.array(ps)
+    assert np.mean(ps < 0.05) <= 0.05 + 3 * np.sqrt(0.05 * 0.95 / ps.size)

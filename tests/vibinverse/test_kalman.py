@@ -1,10 +1,27 @@
-"""The Kalman likelihood against two oracles: the dense multivariate normal and celerite2."""
+"""The Kalman likelihood against two oracles: the dense multivariate normal and celerite2; the
+per-step filter (irregular stamps) against the fixed-step one, its numpy reference and the dense
+normal at irregular times; the oscillator's closed-form discretization against the Van Loan matrix
+exponential."""
 
 import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from vibinverse.kalman import discretize_continuous, log_likelihood, log_likelihood_reference, stationary_covariance
+from vibinverse.kalman import (
+    discretize_continuous,
+    log_likelihood,
+    log_likelihood_reference,
+    log_likelihood_steps,
+    log_likelihood_steps_reference,
+    oscillator_stationary,
+    oscillator_tables,
+    pointwise_log_likelihood,
+    simulate,
+    stationary_covariance,
+    unique_steps,
+    whiten,
+    whiten_steps,
+)
 
 
 def small_model():
@@ -72,3 +89,153 @@ def test_compiled_kernels_are_cached_outside_the_package(tmp_path):
     assert r.returncode == 0, r.stderr
     assert set(package.rglob("*.nbi")) == before
     assert list((tmp_path / "vibinverse" / "numba").rglob("*.nbi"))
+
+
+# ------------------------------------------------------------------ irregular stamps: per-step (Phi, Q)
+
+W3 = 2 * np.pi * 3.46  # the paper's tilt resonance (rad/s)
+
+
+def _scaled_errors(phi, q, ref_phi, ref_q, w):
+    """Phi's error normwise in the states (q, q' / w), each Q entry's relative to its own scale
+    (Q12 to sqrt(Q11 Q22): it crosses zero at half periods)."""
+    d = np.diag([1.0, 1.0 / w])
+    di = np.diag([1.0, w])
+    e_phi = np.abs(d @ (phi - ref_phi) @ di).max() / np.abs(d @ ref_phi @ di).max()
+    e_q = max(
+        abs(q[0, 0] - ref_q[0, 0]) / ref_q[0, 0],
+        abs(q[1, 1] - ref_q[1, 1]) / ref_q[1, 1],
+        abs(q[0, 1] - ref_q[0, 1]) / np.sqrt(ref_q[0, 0] * ref_q[1, 1]),
+    )
+    return e_phi, e_q
+
+
+WDT = np.array([1e-3, 0.05, 0.3, 0.49, 0.51, 1.0, np.pi / 2, np.pi, 2 * np.pi * 0.99, 2 * np.pi])  # w dt
+ZETAS = [0.0, 1e-6, 1e-3, 0.0138, 0.3, 0.999, 0.999999, 1.0, 1.000001, 1.5]
+
+
+@pytest.mark.parametrize("zeta", ZETAS)
+def test_oscillator_tables_equal_the_van_loan_matrix_exponential(zeta):
+    """Closed form against scipy's expm of the Van Loan block matrix to 1e-12, from w dt = 1e-3 (where
+    Q11's closed form would cancel to 1e-10 and its series takes over) through the series' edge
+    (w dt = 0.5) to a whole period: undamped, near-undamped, critically and over-damped. (Over-damped
+    past w dt = pi, scipy's expm itself errs by 1e-11 and more; the 150-digit oracle below covers it.)"""
+    wdt = WDT if zeta <= 1 else WDT[: int(np.searchsorted(WDT, np.pi, side="right"))]
+    dts = wdt / W3
+    phis, qs = oscillator_tables(W3, zeta, dts, kappa=2.5)
+    a = np.array([[0.0, 1.0], [-(W3**2), -2 * zeta * W3]])
+    for k, dt in enumerate(dts):
+        ref_phi, ref_q = discretize_continuous(a, np.array([0.0, 1.0]), 2.5, dt)
+        e_phi, e_q = _scaled_errors(phis[k], qs[k], ref_phi, ref_q, W3)
+        assert e_phi < 1e-12 and e_q < 1e-12, (zeta, wdt[k], e_phi, e_q)
+
+
+def test_oscillator_tables_equal_a_150_digit_van_loan_exponential():
+    """The same Van Loan block matrix exponentiated in 150-digit arithmetic (mpmath): the closed form
+    is within 2e-14 everywhere on the grid, also where scipy's double-precision expm is not (the
+    worst, 1e-14, is e^{-a dt} at a dt = 20: the rounding of its argument; and Q11 when overdamped
+    at zeta = 5, where the series stops at R dt = 1/2 before w dt is large)."""
+    mpmath = pytest.importorskip("mpmath")
+    mpmath.mp.dps = 150  # the Van Loan block cancels e^{+-2 a dt}: up to 1e87 at a dt = 100
+    worst = 0.0
+    for zeta in [*ZETAS, 5.0]:
+        for wdt in [*WDT, 20.0]:
+            w, z, dt = mpmath.mpf(W3), mpmath.mpf(zeta), mpmath.mpf(wdt) / mpmath.mpf(W3)
+            m = mpmath.matrix([[0, -1, 0, 0], [w * w, 2 * z * w, 0, 2.5], [0, 0, 0, -w * w], [0, 0, 1, -2 * z * w]])
+            e = mpmath.expm(m * dt)  # [[-A, G G^T qc], [0, A^T]]
+            ref_phi = e[2:4, 2:4].T
+            ref = (np.array(ref_phi.tolist(), dtype=float), np.array((ref_phi * e[0:2, 2:4]).tolist(), dtype=float))
+            phis, qs = oscillator_tables(W3, zeta, np.array([wdt / W3]), kappa=2.5)
+            worst = max(worst, *_scaled_errors(phis[0], qs[0], *ref, W3))
+    assert worst < 2e-14
+
+
+def test_oscillator_tables_compose_over_steps_and_keep_the_stationary_covariance():
+    """Exact discretizations compose: (Phi, Q) over a + b equal those over b then a (what makes a
+    dropped frame the same as a NaN gap); and P_inf = Phi P_inf Phi^T + Q at any step."""
+    for zeta in (1e-3, 0.2, 0.9):
+        (pa, pb, pab), (qa, qb, qab) = oscillator_tables(W3, zeta, np.array([0.0041, 0.0067, 0.0108]))
+        np.testing.assert_allclose(pa @ pb, pab, rtol=0, atol=1e-14)
+        composed = pa @ qb @ pa.T + qa
+        assert np.abs(composed - qab).max() <= 1e-13 * np.abs(qab).max()
+        p_inf = oscillator_stationary(W3, zeta)
+        for phi, q in zip(*oscillator_tables(W3, zeta, np.array([1e-4, 0.005, 0.3, 2.0]))):
+            assert np.abs(phi @ p_inf @ phi.T + q - p_inf).max() <= 1e-12 * p_inf.max()
+
+
+def test_unique_steps_round_to_1e_9_of_the_median_step():
+    t = np.concatenate([np.arange(10) * 0.005, 0.05 + 0.010 + np.arange(5) * 0.005]) * (1 + 1e-14)
+    steps, idx = unique_steps(t)
+    assert steps.size == 2 and idx[0] == 0 and idx.size == t.size
+    np.testing.assert_allclose(steps[idx[1:]], np.diff(t), rtol=1e-9)
+    uniform = np.arange(4000) * 0.005 + 12.3
+    assert unique_steps(uniform)[0].size == 1  # one step: the uniform grid's cost
+
+
+def _irregular_model(seed=0, n=80):
+    """Two oscillators (one seen at gain 1.3, one at -0.4) at irregular times with dropped frames."""
+    rng = np.random.default_rng(seed)
+    frames = np.cumsum(np.where(rng.random(n) < 0.1, 2, 1))
+    t = (frames + rng.uniform(-0.2, 0.2, n)) * 0.005
+    steps, idx = unique_steps(t)
+    pa, qa = oscillator_tables(W3, 0.05, steps, kappa=3.0)
+    pb, qb = oscillator_tables(2 * W3, 0.2, steps, kappa=1.0)
+    phis, qs = np.zeros((steps.size, 4, 4)), np.zeros((steps.size, 4, 4))
+    phis[:, :2, :2], phis[:, 2:, 2:], qs[:, :2, :2], qs[:, 2:, 2:] = pa, pb, qa, qb
+    p0 = np.zeros((4, 4))
+    p0[:2, :2], p0[2:, 2:] = oscillator_stationary(W3, 0.05, 3.0), oscillator_stationary(2 * W3, 0.2, 1.0)
+    h = np.array([1.3, 0.0, -0.4, 0.0])
+    return t, phis, qs, idx, h, 1e-7, p0
+
+
+def test_per_step_kalman_equals_the_dense_normal_at_irregular_times():
+    """The stationary process at irregular times: Cov(x(t_i), x(t_j)) = Phi(t_i - t_j) P_inf, the
+    dense normal's log density of the observed samples (gaps skipped)."""
+    t, phis, qs, idx, h, r, p0 = _irregular_model()
+    n = t.size
+    lag_phi = {}
+    cov = np.empty((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            d = t[i] - t[j]
+            if d not in lag_phi:
+                pa = oscillator_tables(W3, 0.05, np.array([d]))[0][0] if d > 0 else np.eye(2)
+                pb = oscillator_tables(2 * W3, 0.2, np.array([d]))[0][0] if d > 0 else np.eye(2)
+                lag_phi[d] = np.block([[pa, np.zeros((2, 2))], [np.zeros((2, 2)), pb]])
+            cov[i, j] = cov[j, i] = h @ lag_phi[d] @ p0 @ h
+    cov += r * np.eye(n)
+    y = np.random.default_rng(1).multivariate_normal(np.zeros(n), cov)
+    y[[3, 40, 41]] = np.nan
+    keep = np.isfinite(y)
+    dense = multivariate_normal(np.zeros(keep.sum()), cov[np.ix_(keep, keep)]).logpdf(y[keep])
+    assert log_likelihood_steps(y, phis, qs, idx, h, r, p0) == pytest.approx(dense, abs=1e-8)
+    assert log_likelihood_steps_reference(y, phis, qs, idx, h, r, p0) == pytest.approx(dense, abs=1e-8)
+
+
+def test_per_step_kernel_with_one_step_is_the_fixed_step_kernel():
+    """A uniform grid through the per-step kernel (one table entry) is the fast kernel, bit for bit;
+    the pointwise densities sum to it and are NaN at gaps, the innovations are the same."""
+    phi, q, h, r, p0 = small_model()
+    y = np.random.default_rng(2).normal(size=500)
+    y[[7, 8, 300]] = np.nan
+    idx = np.zeros(y.size, dtype=np.int64)
+    fixed = log_likelihood(y, phi, q, h, r, p0)
+    assert log_likelihood_steps(y, phi[None], q[None], idx, h, r, p0) == fixed
+    pointwise = pointwise_log_likelihood(y, phi[None], q[None], idx, h, r, p0)
+    assert np.array_equal(np.isnan(pointwise), np.isnan(y))
+    assert np.nansum(pointwise) == pytest.approx(fixed, rel=1e-12)
+    np.testing.assert_array_equal(whiten_steps(y, phi[None], q[None], idx, h, r, p0), whiten(y, phi, q, h, r, p0))
+
+
+def test_simulate_draws_the_stationary_process_at_irregular_times():
+    """The ensemble of 4000 draws: Var(y_k) = h P_inf h + r at every stamp, and the lag-1 covariance
+    h Phi(dt_k) P_inf h at each step, within 5 standard errors of the ensemble means."""
+    t, phis, qs, idx, h, r, p0 = _irregular_model(n=40)
+    rng = np.random.default_rng(3)
+    draws = np.array([simulate(phis, qs, idx, h, r, p0, rng) for _ in range(4000)])
+    var = h @ p0 @ h + r
+    lag = np.array([h @ phis[idx[k]] @ p0 @ h for k in range(1, t.size)])
+    v_stat = np.mean(draws**2, axis=1) / var  # per draw: mean over stamps of y^2 / Var
+    l_stat = np.mean(draws[:, 1:] * draws[:, :-1] / lag, axis=1)
+    for stat in (v_stat, l_stat):
+        assert abs(stat.mean() - 1.0) < 5 * stat.std() / np.sqrt(stat.size), (stat.mean(), stat.std())

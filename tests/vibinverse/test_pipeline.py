@@ -121,7 +121,7 @@ def test_a_reading_the_data_cannot_rule_out_is_reported():
 
 
 def test_a_fit_beyond_the_memory_limit_is_refused_and_casadi_steps_aside(monkeypatch, caplog):
-    """The casadi frame objective takes ~0.3 MB a sample: above the limit the scipy MAP runs instead;
+    """The casadi frame objective takes ~25 kB a sample: above the limit the scipy MAP runs instead;
     a series whose fit as a whole would not fit is refused before any work."""
     import logging
 
@@ -132,7 +132,7 @@ def test_a_fit_beyond_the_memory_limit_is_refused_and_casadi_steps_aside(monkeyp
     scene = vi.load_scene(builtin_scene("roof_frame"), ["noise.sigma=0.6", "sampling.duration=5"])
     obs = vi.simulate(scene, seed=3)
     s = vi.series(obs.time, obs.intensity, scene=scene)
-    monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", str(100e6))  # 1000 samples: 300 MB for casadi, 3 MB in all
+    monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", str(10e6))  # 1000 samples: 25 MB for casadi, 3 MB in all
     with caplog.at_level(logging.INFO, logger="vibinverse"):
         result = vi.fit(s, scene, method="casadi")
     assert result.method == "map" and "above the memory limit" in caplog.text

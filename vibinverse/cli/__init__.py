@@ -2,10 +2,14 @@
 
 Errors are mapped to exit codes here, in one place (`EXIT_CODES`): bad input exits with code 2 and
 one line on stderr naming the problem, with no traceback and no partial output file.
+
+Each verb returns its results and the paths it wrote as a dict; with `--json`, `main` prints that
+dict as one strict JSON document on stdout and sends the log (and anything else printed) to stderr.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import signal
@@ -25,10 +29,15 @@ SIGNAL_EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's nu
 
 
 class _ConsoleHandler(logging.Handler):
-    """Messages to the current sys.stdout, warnings and errors to sys.stderr (looked up per record)."""
+    """Messages to the current sys.stdout (sys.stderr with `to_stderr`, when stdout carries JSON),
+    warnings and errors to sys.stderr (streams looked up per record)."""
+
+    def __init__(self, to_stderr: bool = False) -> None:
+        super().__init__()
+        self.to_stderr = to_stderr
 
     def emit(self, record: logging.LogRecord) -> None:
-        stream = sys.stderr if record.levelno >= logging.WARNING else sys.stdout
+        stream = sys.stderr if self.to_stderr or record.levelno >= logging.WARNING else sys.stdout
         try:
             stream.write(self.format(record) + "\n")
             stream.flush()
@@ -38,12 +47,13 @@ class _ConsoleHandler(logging.Handler):
             self.handleError(record)
 
 
-def configure_logging(quiet: bool = False, verbose: bool = False) -> None:
-    """The package's log to the console: INFO by default, WARNING with -q, DEBUG with -v."""
+def configure_logging(quiet: bool = False, verbose: bool = False, json: bool = False) -> None:
+    """The package's log to the console: INFO by default, WARNING with -q, DEBUG with -v; all of it
+    on stderr with `json` (--json: stdout carries the JSON document only)."""
     root = logging.getLogger("vibinverse")
     for h in [h for h in root.handlers if isinstance(h, _ConsoleHandler)]:
         root.removeHandler(h)
-    handler = _ConsoleHandler()
+    handler = _ConsoleHandler(to_stderr=json)
     handler.setFormatter(logging.Formatter("%(message)s"))
     root.addHandler(handler)
     root.setLevel(logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO)
@@ -64,14 +74,22 @@ def _terminate(signum: int, frame: object) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; the exit code. The package logger's console handler, level and propagation
+    are restored afterwards, so a caller that runs `main` in its own process keeps its logging."""
     previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
+    package = logging.getLogger("vibinverse")
+    saved = (list(package.handlers), package.level, package.propagate)
     try:
         from vibinverse.cli.commands import build_parser
 
         configure_logging()
         args = build_parser().parse_args(argv)
-        configure_logging(getattr(args, "quiet", False), getattr(args, "verbose", False))
-        args.func(args)
+        as_json = bool(getattr(args, "json", False))
+        configure_logging(getattr(args, "quiet", False), getattr(args, "verbose", False), as_json)
+        if as_json:
+            print_json(run_quietly(args))
+        else:
+            args.func(args)
     except Interrupted as exc:
         print(f"vibinverse: {exc}", file=sys.stderr)
         return exit_code(exc)
@@ -88,7 +106,23 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+        package.handlers[:], package.propagate = saved[0], saved[2]
+        package.setLevel(saved[1])
     return 0
+
+
+def run_quietly(args: object) -> object:
+    """Run the verb with anything it or a library prints sent to stderr; return its result."""
+    with contextlib.redirect_stdout(sys.stderr):
+        return args.func(args)
+
+
+def print_json(doc: object) -> None:
+    """--json: the verb's result as one strict JSON document on stdout (non-finite numbers null)."""
+    from vibinverse.io import jsonio
+
+    sys.stdout.write(jsonio.dumps(doc if doc is not None else {}, indent=2) + "\n")
+    sys.stdout.flush()
 
 
 def entry() -> None:

@@ -8,27 +8,36 @@ and the model's predictive band.
 
 from __future__ import annotations
 
+import logging
 import time
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 import numpy as np
 
+from vibinverse.checks import residual_checks
 from vibinverse.detection import line_detection
+from vibinverse.errors import Unsupported
+from vibinverse.models.base import intensity_units
 from vibinverse.posterior import Posterior
 from vibinverse.result import FitResult
+
+logger = logging.getLogger(__name__)
 
 
 class Estimator(ABC):
     """fit(posterior, start) -> FitResult; subclasses implement `estimate`."""
 
     name: ClassVar[str]
+    #: what the intervals of a result without posterior draws are (the summary labels them)
+    approximation: ClassVar[str] = "laplace"
 
     def fit(self, posterior: Posterior, start: FitResult | None = None, **options: Any) -> FitResult:
         """Estimate, time it (`timing[{name}_s]`), and complete the result (`complete`)."""
         t0 = time.perf_counter()
         result = self.estimate(posterior, start, **options)
         result.timing.setdefault(f"{self.name}_s", time.perf_counter() - t0)
+        result.approximation = None if result.chains is not None else self.approximation
         return complete(result, posterior)
 
     @abstractmethod
@@ -59,23 +68,75 @@ def base_result(posterior: Posterior, method: str, point: dict[str, float], **fi
 
 def complete(result: FitResult, posterior: Posterior) -> FitResult:
     """Add what every result carries: the truth, the data's description, the detection test of
-    every line at the point estimate, and the predictive band."""
+    every line at the point estimate, the predictive band, the parameters' units, the residual
+    checks at the point estimate, and the pointwise log-likelihood and replicate series of a subset
+    of the draws (ArviZ's log_likelihood and posterior_predictive groups)."""
     series = posterior.series
+    model = posterior.model
     data = {
         "source": series.source,
         "description": series.describe(),
         "n_gaps": series.n_gaps,
         "n_samples": int(series.time.size),
+        "intensity_units": intensity_units(series),
+        "time_units": "s",
     }
-    described = posterior.model.describe()
+    if series.time_reference:
+        data["time_reference"] = series.time_reference
+    described = model.describe()
     if described is not None:
         data["model"] = dict(described)
     result.data = {**data, **result.data}
     result.truth = posterior.truth()
+    result.units = {n: model.units(n) for n in result.names}
     result.diagnostics.update(line_detection(posterior, result.point))
     draws = result.draws if result.chains is not None else result.approximate_draws
     result.predictive = predictive(posterior, result.point, draws)
+    try:
+        residual = model.residuals(result.point)
+    except Unsupported as exc:
+        logger.debug("no residual checks: %s", exc)
+    else:
+        result.predictive["residual"] = residual
+        result.diagnostics["residual_checks"] = residual_checks(residual)
+    chains = (
+        result.chains
+        if result.chains is not None
+        else (None if result.approximate_draws is None else result.approximate_draws[None])
+    )
+    if chains is not None and chains.size:
+        try:
+            result.pointwise = pointwise(posterior, chains)
+        except Unsupported as exc:
+            logger.debug("no log_likelihood or posterior_predictive group: %s", exc)
     return result
+
+
+#: values stored per group (log_likelihood, posterior_predictive): draws x samples <= this
+POINTWISE_BUDGET = 4_000_000
+MIN_POINTWISE_DRAWS, MAX_POINTWISE_DRAWS = 40, 400
+
+
+def pointwise(posterior: Posterior, chains: np.ndarray, seed: int = 0) -> dict[str, np.ndarray]:
+    """The pointwise log-likelihood and one replicate series of each draw of an evenly thinned
+    subset (every chain, the same draw indices): arrays (chain, draw, sample), plus `draw` (the
+    indices kept). The subset has between MIN_ and MAX_POINTWISE_DRAWS draws in all, fewer the
+    longer the series (POINTWISE_BUDGET), so that a result file stays tens of MB at most."""
+    model, names = posterior.model, posterior.space.names
+    n_chain, n_draw, _ = chains.shape
+    t = posterior.series.time.size
+    total = int(np.clip(POINTWISE_BUDGET // max(t, 1), MIN_POINTWISE_DRAWS, MAX_POINTWISE_DRAWS))
+    per_chain = int(min(n_draw, max(1, round(total / n_chain))))
+    keep = np.unique(np.linspace(0, n_draw - 1, per_chain).round().astype(int))
+    rng = np.random.default_rng(seed)
+    loglik = np.empty((n_chain, keep.size, t))
+    reps = np.empty((n_chain, keep.size, t))
+    for c in range(n_chain):
+        for i, d in enumerate(keep):
+            values = dict(zip(names, chains[c, d]))
+            loglik[c, i] = model.pointwise_log_likelihood(values)
+            reps[c, i] = model.replicate(values, rng)
+    return {"log_likelihood": loglik, "replicates": reps, "draw": keep}
 
 
 def predictive(posterior: Posterior, values: dict[str, float], draws: np.ndarray | None) -> dict[str, np.ndarray]:

@@ -150,6 +150,10 @@ def sindy_frame(series: Series, like: ResonanceModel, start: dict[str, float]) -
     """Identify the tilt resonance and damping ratio (and, through the forward model, the drive
     amplitude) starting from the spectral stage's `start`. Raises SindyFailed with the reason."""
     k = like.key
+    if not series.uniform:
+        raise SindyFailed(
+            "sindy: the correlation function needs a uniform grid and the stamps are irregular; the MAP takes over"
+        )
     ratio = first_order_ratio(like, start)
     if ratio < 3.0:
         raise SindyFailed(
@@ -261,6 +265,7 @@ class SindyEstimator(Estimator):
     `starts` put the identified values first, for the MAP."""
 
     name = "sindy"
+    approximation = "jackknife"
 
     @staticmethod
     def covers(posterior: Posterior) -> bool:

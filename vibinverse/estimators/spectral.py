@@ -30,6 +30,7 @@ class SpectralEstimator(Estimator):
     """Periodogram peaks and sinusoid fits calibrated through the forward model."""
 
     name = "spectral"
+    approximation = "spectral"
 
     def estimate(self, posterior: Posterior, start: FitResult | None, **options: Any) -> FitResult:
         starts = ranked_starts(posterior)

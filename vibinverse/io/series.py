@@ -24,6 +24,14 @@ from vibinverse.io import jsonio
 # a uniform grid's tolerance, relative to its step: a timing error of 1e-3 of a sample moves a line at
 # Nyquist by 3e-3 rad, far below any phase a fit resolves
 UNIFORM_RTOL = 1e-3
+#: how the readers note a time reference and the intensity's units (`Series.notes`)
+TIME_REFERENCE_NOTE = "time: seconds since "
+UNITS_NOTE = "intensity units: "
+
+
+def _noted(notes: list[str], prefix: str) -> str | None:
+    """The text after `prefix` of the first note that starts with it."""
+    return next((n[len(prefix) :].strip() for n in notes if n.startswith(prefix)), None)
 
 
 @dataclass(frozen=True)
@@ -58,12 +66,45 @@ class Series:
     def fs(self) -> float:
         return 1.0 / self.dt
 
+    @property
+    def time_reference(self) -> str | None:
+        """The date-time the stamps count seconds from, when the file gave one (ISO date-times, a
+        netCDF axis with CF units `... since EPOCH`); None for plain seconds."""
+        return _noted(self.notes, TIME_REFERENCE_NOTE)
+
+    @property
+    def intensity_units(self) -> str | None:
+        """The intensity's units when the file gave them (a netCDF `units` attribute), else None."""
+        units = _noted(self.notes, UNITS_NOTE)
+        return None if units is None else units.split(" (")[0]
+
     def describe(self) -> str:
-        kind = f"uniform at {self.fs:g} Hz" if self.uniform else f"non-uniform (median step {self.dt:g} s)"
+        kind = f"uniform at {self.fs:g} Hz" if self.uniform else irregular_sampling(self.time)
         return (
             f"{self.time.size} samples over {self.time[-1] - self.time[0]:g} s, {kind}; "
             f"{self.n_gaps} gaps ({self.n_gaps / self.time.size:.1%})"
         )
+
+
+def sampling_summary(t: NDArray[np.float64]) -> tuple[float, float, int]:
+    """(median step s, jitter, dropped frames) of increasing stamps t: each step spans a whole
+    number of median steps (frames, at least one), a frame missing between two stamps is dropped, and
+    the jitter is the RMS deviation of the stamps from the least-squares regular grid of those frame
+    numbers, as a fraction of its step (a drifting clock is a grid, not jitter)."""
+    d = np.diff(t)
+    step = float(np.median(d))
+    frames = np.maximum(np.rint(d / step), 1.0)
+    number = np.concatenate([[0.0], np.cumsum(frames)])
+    basis = np.stack([np.ones_like(number), number], axis=1)
+    coef = np.linalg.lstsq(basis, t - t[0], rcond=None)[0]
+    jitter = float(np.sqrt(np.mean((t - t[0] - basis @ coef) ** 2)) / coef[1]) if coef[1] > 0 else 0.0
+    return step, jitter, int(frames.sum() - frames.size)
+
+
+def irregular_sampling(t: NDArray[np.float64]) -> str:
+    """The one-line description of irregular stamps (`sampling_summary`)."""
+    step, jitter, dropped = sampling_summary(t)
+    return f"irregular sampling: median step {step:.6g} s, jitter {100 * jitter:.3g} % (rms), {dropped} dropped frames"
 
 
 # The values a series may hold. Beyond them float64 arithmetic fails before any model does: the
@@ -299,9 +340,9 @@ def _read_netcdf(p: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
             )
         t = t.astype(float) * _TIME_UNITS[unit]
         if epoch.strip():  # a CF date axis (datetime64 written by xarray): seconds since its epoch
-            notes.append(f"time: seconds since {text[text.lower().index(' since ') + 7 :].strip()}")
+            notes.append(f"{TIME_REFERENCE_NOTE}{text[text.lower().index(' since ') + 7 :].strip()}")
     if x_units is not None and str(x_units).strip():
-        notes.append(f"intensity units: {str(x_units).strip()} (values kept; the fit's gain absorbs them)")
+        notes.append(f"{UNITS_NOTE}{str(x_units).strip()} (values kept; the fit's gain absorbs them)")
     return t, x, notes
 
 
@@ -348,7 +389,7 @@ def _since_first(stamps: Any) -> tuple[np.ndarray, str]:
     if stamps.tz is not None:
         stamps = stamps.tz_convert("UTC").tz_localize(None)
     d = stamps.to_numpy()
-    return (d - d[0]) / np.timedelta64(1, "s"), f"time: seconds since {ref}"
+    return (d - d[0]) / np.timedelta64(1, "s"), f"{TIME_REFERENCE_NOTE}{ref}"
 
 
 # an ISO 8601 date-time (date, optional time with decimal-point fraction, optional zone), and a
@@ -469,8 +510,10 @@ def validate(
 ) -> Series:
     """Check a series; NaN intensities are gaps, anything else non-finite is an error. Refused, each
     with one line: non-numeric, complex or boolean values, fewer than 16 samples, a time that is not
-    strictly increasing, values beyond +-MAX_ABS, and an intensity that is constant (or varies by
-    less than MIN_SPREAD): nothing to fit."""
+    strictly increasing (naming the first offending sample and both stamps), values beyond
+    +-MAX_ABS, and an intensity that is constant (or varies by less than MIN_SPREAD): nothing to fit.
+    Irregular stamps (jitter, dropped frames; off a regular grid by more than UNIFORM_RTOL of its
+    step) are accepted and described in `notes` (`irregular_sampling`)."""
     t, x = _numbers(t, "time"), _numbers(x, "intensity")
     if t.ndim != 1 or x.ndim != 1 or t.size != x.size:
         raise DataError(f"data: time and intensity must be 1-D of equal length, got {t.shape} and {x.shape}")
@@ -481,7 +524,8 @@ def validate(
     _in_range(t, "time")
     if not np.all(np.diff(t) > 0):
         k = int(np.argmin(np.diff(t) > 0))
-        raise DataError(f"data: time must be strictly increasing (sample {k + 1}: {t[k + 1]:g} after {t[k]:g})")
+        a, b = _distinct(t[k + 1], t[k])
+        raise DataError(f"data: time must be strictly increasing (sample {k + 1}: {a} after {b})")
     step = float(np.min(np.diff(t)))
     if step < MIN_SPREAD:
         raise DataError(f"data: a time step of {step:g} s; allowed: at least {MIN_SPREAD:g} s")
@@ -501,7 +545,20 @@ def validate(
             f"data: the intensity varies by only {spread:g} (peak to peak); at least {MIN_SPREAD:g} is needed "
             "(rescale the data)"
         )
-    return Series(t, x, source, scene, list(notes or []))
+    notes = list(notes or [])
+    series = Series(t, x, source, scene, notes)
+    if not series.uniform:  # accepted: the frame model's filter steps exactly over each interval
+        notes.append(f"time: {irregular_sampling(t)}")
+    return series
+
+
+def _distinct(a: float, b: float) -> tuple[str, str]:
+    """a and b written with the fewest significant digits (at least 6) that tell them apart."""
+    for digits in range(6, 18):
+        sa, sb = f"{a:.{digits}g}", f"{b:.{digits}g}"
+        if sa != sb:
+            break
+    return sa, sb
 
 
 def _in_range(a: np.ndarray, what: str) -> None:

@@ -48,7 +48,7 @@ class SignalModel(ABC):
     #: IPOPT runs from every start whose log posterior is within this margin of the best start's
     map_start_margin: ClassVar[float] = math.inf
     #: memory the casadi MAP's compiled objective takes per sample (measured peak, rounded up)
-    casadi_bytes_per_sample: ClassVar[float] = 300e3
+    casadi_bytes_per_sample: ClassVar[float] = 50e3
     #: values a scene file may leave out, with the value the forward model then uses
     scene_defaults: ClassVar[dict[str, float]] = {}
 
@@ -131,6 +131,64 @@ class SignalModel(ABC):
     def describe(self) -> dict[str, Any] | None:
         """What the summary's data.model records (None: nothing)."""
         return None
+
+    # ------------------------------------------------- checks of the model against the data
+    def pointwise_log_likelihood(self, values: dict[str, float]) -> np.ndarray:
+        """Each sample's log density given the samples before it (the one-step predictive
+        density of a state-space model; the density of an independent sample otherwise), NaN at
+        gaps: `np.nansum` of it is `log_likelihood(values)`. ArviZ's `log_likelihood` group holds
+        it, so that `az.loo` and `az.compare` work. Unsupported when the model cannot split its
+        likelihood by sample."""
+        raise Unsupported(f"the {self.name} model does not split its likelihood by sample")
+
+    def residuals(self, values: dict[str, float]) -> np.ndarray:
+        """Standardized one-step residuals (innovations) at `values`: independent N(0, 1) when the
+        model describes the data; NaN at gaps."""
+        raise Unsupported(f"the {self.name} model has no standardized residuals")
+
+    def replicate(self, values: dict[str, float], rng: np.random.Generator) -> np.ndarray:
+        """A series the model at `values` could have produced at the data's time stamps (mean plus a
+        draw of every random term), NaN where the data have gaps: one posterior-predictive draw."""
+        raise Unsupported(f"the {self.name} model does not simulate replicate series")
+
+    def units(self, name: str) -> tuple[str, str]:
+        """(units, long name) of parameter `name`, CF-style ("1" for a ratio); the intensity's
+        units are the data's (`Series.intensity_units`)."""
+        return parameter_units(name, intensity_units(self.series))
+
+
+#: units of parameters by the last part of their name, first match wins
+_UNITS: tuple[tuple[str, str, str], ...] = (
+    ("damping_ratio", "1", "damping ratio"),
+    ("frequency", "Hz", "frequency"),
+    ("phase", "rad", "phase"),
+    ("inclination", "rad", "inclination"),
+    ("azimuth", "rad", "azimuth"),
+    ("lobe_width", "rad", "specular lobe width"),
+    ("irradiance", "1", "relative irradiance (calibration gain)"),
+    ("amplitude", "m", "amplitude"),
+    ("deflection", "m", "deflection"),
+    ("displacement", "m", "displacement"),
+    ("noise_rms", "m", "RMS of the white base motion"),
+)
+
+
+def intensity_units(series: Series) -> str:
+    """The data's intensity units as the reader recorded them, or "1" (arbitrary units)."""
+    return series.intensity_units or "1"
+
+
+def parameter_units(name: str, intensity: str = "1") -> tuple[str, str]:
+    """(units, long name) of a dotted parameter name by its last part (`_UNITS`); `noise.sigma` in
+    the intensity's units; "1" when nothing matches."""
+    last = name.split(".")[-1].split("[")[0]
+    if name == "noise.sigma":
+        return intensity, "sensor noise standard deviation"
+    for suffix, units, long_name in _UNITS:
+        if last.endswith(suffix):
+            what = last[: -len(suffix)].strip("_").replace("_", " ")
+            return units, f"{what} {long_name}".strip()
+    return "1", last.replace("_", " ")
 
 
 MODELS: dict[str, type[SignalModel]] = {}

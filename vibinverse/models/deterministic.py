@@ -30,7 +30,7 @@ from forward.motion.base import ModalMotion
 from forward.reduce import DEFAULT_RTOL, chebyshev_surface, compile_scene, footprint_layout, taylor_surface_ac
 from forward.scene_file import scene_from_table
 from forward.validation import Table
-from vibinverse.errors import SceneError
+from vibinverse.errors import SceneError, Unsupported
 from vibinverse.fisher import response_fisher
 from vibinverse.io.scenes import scene_of
 from vibinverse.io.series import Series, with_sampling
@@ -304,11 +304,13 @@ class DeterministicModel(SignalModel):
             var = var + (full / (2**noise.adc_bits - 1)) ** 2 / 12.0
         return var
 
-    def log_likelihood(self, values: dict[str, float]) -> float:
+    def _misfit(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray | float, np.ndarray] | None:
+        """(residuals of the good samples, their noise variance, the mean) at `values`; None
+        outside what the scene or the noise allows."""
         try:
             level, ac = self.parts(values)
         except ForwardSceneError:  # a value outside what the scene allows
-            return -math.inf
+            return None
         # residuals about the data's mean level: y - x = (y - ref) - ((level - ref) + ac), so that
         # no sample's residual is a difference of two numbers at the mean level
         r = self._y_ref - ((level - self.ref_level) + ac[self._good])
@@ -317,11 +319,47 @@ class DeterministicModel(SignalModel):
         if np.ndim(var):
             var = var[self._good]
         if not np.all(np.asarray(var) > 0):
+            return None
+        return r, var, level + ac
+
+    def log_likelihood(self, values: dict[str, float]) -> float:
+        misfit = self._misfit(values)
+        if misfit is None:
             return -math.inf
+        r, var, _ = misfit
         n = r.size
         if np.ndim(var):
             return float(-0.5 * (np.sum(r * r / var) + np.sum(np.log(var)) + n * math.log(2 * math.pi)))
         return float(-0.5 * (np.dot(r, r) / var + n * math.log(2 * math.pi * var)))
+
+    def pointwise_log_likelihood(self, values: dict[str, float]) -> np.ndarray:
+        """Independent Gaussian densities, one per sample (the noise is white); NaN at gaps."""
+        out = np.full(self.series.time.size, np.nan)
+        misfit = self._misfit(values)
+        if misfit is not None:
+            r, var, _ = misfit
+            out[self._good] = -0.5 * (r * r / var + np.log(2 * math.pi * np.asarray(var)))
+        return out
+
+    def residuals(self, values: dict[str, float]) -> np.ndarray:
+        """r / sd of every sample (white noise: the residuals are the innovations); NaN at gaps."""
+        out = np.full(self.series.time.size, np.nan)
+        misfit = self._misfit(values)
+        if misfit is not None:
+            r, var, _ = misfit
+            out[self._good] = r / np.sqrt(var)
+        return out
+
+    def replicate(self, values: dict[str, float], rng: np.random.Generator) -> np.ndarray:
+        """The mean plus white noise of the model's variance, NaN at the data's gaps."""
+        misfit = self._misfit(values)
+        if misfit is None:
+            raise Unsupported("replicate: the values lie outside what the scene allows")
+        _, var, mean = misfit
+        out = np.full(self.series.time.size, np.nan)
+        good = self._good
+        out[good] = np.asarray(mean)[good] + np.sqrt(var) * rng.standard_normal(int(good.sum()))
+        return out
 
     # ------------------------------------------------------------------ what the estimators need
     def check_free(self, names: list[str]) -> None:

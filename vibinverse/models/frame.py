@@ -2,32 +2,50 @@
 
 The forward model supplies every piece; nothing here re-implements physics:
 - `forward.reduce.rigid_observation`: x = x0 + J g + g^T H g / 2 for the roof slopes g = (-ry, rx);
-- `forward.motion.frame`: the linearized frame, the exact steady-state response to the drive, and
-  the exact zero-order-hold discretization of each tilt mode under white base noise.
+- `forward.motion.frame`: the linearized frame and the exact steady-state response to the drive.
 
 The drive gives a deterministic mean; the white base noise gives a random tilt, so the exact
 likelihood of the residual is a Kalman filter on the two tilt modes (4 states, O(T)). The
 observation is linearized in the random part (its quadratic term is ~g/m ~ 1e-4 of the linear one
 at the paper's tilts). Gaps (NaN samples) are skipped by the filter.
+
+Any time stamps. The base noise is continuous white noise whose intensity is noise_rms^2 times the
+series' median step (the spectrum of a white motion of RMS noise_rms held over each sample, as
+`forward` simulates it, below the sample rate; the two tilt variances differ by O((w dt)^2), 1e-3 at
+the paper's 3.46 Hz and 200 Hz). Each tilt mode is discretized exactly over each time step
+(`vibinverse.kalman.oscillator_tables`, closed form): a uniform grid has one step and the fast
+filter; irregular stamps (jitter, dropped frames) a table of (Phi, Q) per distinct step, rounded to
+1e-9 of the median step, and the per-step filter. The drive mean is evaluated at the stamps.
 """
 
 from __future__ import annotations
 
 import contextlib
 import copy
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from forward.errors import SceneError as ForwardSceneError
-from forward.motion.frame import FrameParameters, linearize, mode_zoh
+from forward.motion.frame import FrameParameters, linearize
 from forward.reduce import rigid_observation
-from vibinverse.errors import SceneError, Unsupported
+from vibinverse.errors import NumericalError, SceneError, Unsupported
 from vibinverse.fisher import frame_fisher
 from vibinverse.io.scenes import scene_of
 from vibinverse.io.series import Series, with_sampling
-from vibinverse.kalman import log_likelihood, njit
+from vibinverse.kalman import (
+    log_likelihood,
+    log_likelihood_steps,
+    njit,
+    oscillator_fill,
+    pointwise_log_likelihood,
+    simulate,
+    unique_steps,
+    whiten,
+    whiten_steps,
+)
 from vibinverse.models.base import LineTest, SignalModel, register_model
 from vibinverse.models.frame_spectral import frame_guess, frame_guesses
 from vibinverse.priors import Prior
@@ -66,12 +84,25 @@ def modal_table(table: dict) -> dict:
 
 @dataclass
 class Components:
+    """The model at some values: the mean, the state-space matrices over the nominal (median) step
+    (phi, q; a uniform grid's only step), and the per-step tables (phis[idx[k]], qs[idx[k]] from sample
+    k - 1 to k; one entry on a uniform grid)."""
+
     mean: np.ndarray
     phi: np.ndarray
     q: np.ndarray
     h: np.ndarray
     r: float
     p0: np.ndarray
+    phis: np.ndarray | None = None
+    qs: np.ndarray | None = None
+    idx: np.ndarray | None = None
+
+    def tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(phis, qs, idx) for the per-step filter (a uniform grid: its one step for every sample)."""
+        if self.idx is not None:
+            return self.phis, self.qs, self.idx
+        return self.phi[None], self.q[None], np.zeros(self.mean.size, dtype=np.int64)
 
 
 @register_model
@@ -81,7 +112,7 @@ class FrameModel(SignalModel):
 
     name = "frame"
     map_start_margin = 50.0  # a swapped drive/resonance assignment starts far below the best
-    casadi_bytes_per_sample = 300e3  # the Kalman recursion expanded to SX: 1.2 GB at 4000 samples
+    casadi_bytes_per_sample = 25e3  # unexpanded MX graph and IPOPT: 12 kB a sample measured (4000 samples)
 
     @classmethod
     def describes(cls, table: dict) -> bool:
@@ -101,9 +132,8 @@ class FrameModel(SignalModel):
             out += [k + "drive_frequency", k + "drive_amplitude"]
         return out
 
-    def __init__(self, table: dict, series: Series):
-        if not series.uniform:
-            raise SceneError("fit: the state-space likelihood needs uniformly sampled times (gaps as NaN are fine)")
+    def __init__(self, table: dict, series: Series, *, per_step: bool | None = None):
+        """`per_step`: the per-step filter even on a uniform grid (None: on irregular stamps only)."""
         self.base = modal_table(table)
         self.roof = frame_surface(self.base)
         others = [n for n, s in self.base["surfaces"].items() if n != self.roof and (s.get("motion") or {})]
@@ -150,7 +180,25 @@ class FrameModel(SignalModel):
         step = (self.t[-1] - self.t[0]) / max(self.t.size - 1, 1)  # the grid's step, to the last ulp
         on_grid = np.max(np.abs(self.t - (self.t[0] + np.arange(self.t.size) * step))) <= 1e-9 * step
         self._grid = float(step) if on_grid and self.t.size > 1 else None
+        # time steps: one on a uniform grid (UNIFORM_RTOL); else the distinct ones (rounded to 1e-9 of
+        # the median step), the nominal step appended last (components' phi and q)
+        self.per_step = (not series.uniform) if per_step is None else bool(per_step)
+        if self.per_step:
+            steps, self._idx = unique_steps(self.t, rtol=1e-9)
+            self._steps = np.append(steps, self.dt)
+        else:
+            self._steps, self._idx = np.array([self.dt]), None
         self._observed: tuple[tuple, tuple] | None = None  # the last re-formed observation, by its values
+
+    @property
+    def steps(self) -> np.ndarray:
+        """The distinct time steps (s) the filter discretizes for, the nominal step last."""
+        return self._steps
+
+    @property
+    def step_index(self) -> np.ndarray | None:
+        """Per sample, the index into `steps` of the step before it (None on a uniform grid)."""
+        return self._idx
 
     def components(self, values: dict[str, float]) -> Components:
         """Mean signal and state-space matrices at the given parameter values (others from the base)."""
@@ -175,15 +223,30 @@ class FrameModel(SignalModel):
         gains = {3: jac[1], 4: -jac[0]}
         seen = [i for i in TILT_MODES if abs(gains[i]) > 1e-9 * np.abs(jac).max()]
         n = 2 * len(seen)
-        phi, q, p0, h = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)), np.zeros(n)
+        u = self._steps.size
+        phis, qs = np.zeros((u, n, n)), np.zeros((u, n, n))
+        p0, h = np.zeros((n, n)), np.zeros(n)
+        filled = (0.0, 0.0, 0.0)
         for b, i in enumerate(seen):
-            sl = slice(2 * b, 2 * b + 2)
-            phi_i, gam = mode_zoh(tilt["stiffness"][i], tilt["damping"][i], tilt["mass"][i], self.dt)
-            q_i = rms**2 * (tilt["force_spring"][i] @ tilt["force_spring"][i]) * np.outer(gam, gam)
-            phi[sl, sl], q[sl, sl] = phi_i, q_i
-            p0[sl, sl] = _stationary_2x2(phi_i, q_i)
+            mass = tilt["mass"][i]
+            w_i = math.sqrt(tilt["stiffness"][i] / mass)
+            a_i = tilt["damping"][i] / (2.0 * mass)  # zeta w
+            # the base force's white-noise intensity: (RMS of the held motion)^2 x the nominal step
+            kappa = float(rms**2 * self.dt * (tilt["force_spring"][i] @ tilt["force_spring"][i]) / mass**2)
+            if b and (w_i, a_i) == filled[:2] and filled[2]:  # the other tilt mode, the same oscillator
+                phis[:, 2 * b :, 2 * b :] = phis[:, :2, :2]
+                qs[:, 2 * b :, 2 * b :] = qs[:, :2, :2] * (kappa / filled[2])
+            else:
+                oscillator_fill(w_i, a_i, kappa, self._steps, phis, qs, 2 * b)
+            filled = (w_i, a_i, kappa)
+            if kappa:  # the stationary covariance (infinite undamped: no stationary state)
+                p0[2 * b, 2 * b] = kappa / (4.0 * a_i * w_i * w_i) if a_i > 0 else math.inf
+                p0[2 * b + 1, 2 * b + 1] = kappa / (4.0 * a_i) if a_i > 0 else math.inf
             h[2 * b] = gains[i]
         sigma = values.get("noise.sigma", self.base_value("noise.sigma") if "noise" in self.base else 0.0)
+        phi, q = phis[-1], qs[-1]
+        if self.per_step:
+            return Components(mean, phi, q, h, float(sigma) ** 2, p0, phis, qs, self._idx)
         return Components(mean, phi, q, h, float(sigma) ** 2, p0)
 
     def _geometry_names(self) -> set[str]:
@@ -256,10 +319,9 @@ class FrameModel(SignalModel):
             out = np.empty(self.t.size)
             _drive_mean_kernel(self.t, self._grid, w, qx, qy, x0, jac[0], jac[1], hs[0, 0], hs[0, 1], hs[1, 1], out)
             return out
-        e = np.exp(1j * np.outer(self.t, w))
-        rx, ry = (e @ qx).real, (e @ qy).real
-        gx, gy = -ry, rx
-        return x0 + jac[0] * gx + jac[1] * gy + 0.5 * (hs[0, 0] * gx * gx + 2 * hs[0, 1] * gx * gy + hs[1, 1] * gy * gy)
+        out = np.empty(self.t.size)  # any stamps: each sinusoid at each stamp
+        _drive_mean_at(self.t, w, qx, qy, x0, jac[0], jac[1], hs[0, 0], hs[0, 1], hs[1, 1], out)
+        return out
 
     def fittable(self) -> set[str]:
         """The names this likelihood reads: frame dynamics, drive lines, base noise, sensor noise,
@@ -306,7 +368,39 @@ class FrameModel(SignalModel):
 
     def log_likelihood(self, values: dict[str, float]) -> float:
         c = self.components(values)
+        if not math.isfinite(c.p0.sum()):  # undamped and driven: no stationary start
+            return -math.inf
+        if c.idx is not None:
+            return log_likelihood_steps(self.series.intensity - c.mean, c.phis, c.qs, c.idx, c.h, c.r, c.p0)
         return log_likelihood(self.series.intensity - c.mean, c.phi, c.q, c.h, c.r, c.p0)
+
+    def pointwise_log_likelihood(self, values: dict[str, float]) -> np.ndarray:
+        """Each sample's one-step predictive log density log p(y_k | y_1..y_{k-1}) (the Kalman
+        filter's innovation density), NaN at gaps; `np.nansum` of it is `log_likelihood(values)`."""
+        c = self.components(values)
+        return pointwise_log_likelihood(self.series.intensity - c.mean, *c.tables(), c.h, c.r, c.p0)
+
+    def residuals(self, values: dict[str, float]) -> np.ndarray:
+        """Standardized innovations of the Kalman filter: independent N(0, 1) when the model
+        describes the data; NaN at gaps."""
+        c = self.components(values)
+        y = self.series.intensity - c.mean
+        if c.idx is not None:
+            return whiten_steps(y, c.phis, c.qs, c.idx, c.h, c.r, c.p0)
+        return whiten(y, c.phi, c.q, c.h, c.r, c.p0)
+
+    def replicate(self, values: dict[str, float], rng: np.random.Generator) -> np.ndarray:
+        """A series the model at `values` produces at the data's stamps: the drive mean plus a draw
+        of the tilt process (started in its stationary state) through the observation, plus the
+        sensor noise; NaN where the data have gaps."""
+        c = self.components(values)
+        if not np.all(np.isfinite(c.p0)):
+            raise NumericalError(
+                f"replicate: {self.key}tilt_damping_ratio = 0 with base noise has no stationary state to start from"
+            )
+        out = c.mean + simulate(*c.tables(), c.h, c.r, c.p0, rng)
+        out[self.series.gaps] = np.nan
+        return out
 
     # ------------------------------------------------------------------ what the estimators need
     def default_priors(self) -> dict[str, Prior]:
@@ -422,31 +516,38 @@ def _drive_mean_kernel(t, dt, w, qx, qy, x0, jx, jy, hxx, hxy, hyy, out):  # pra
         out[k] = x0 + jx * gx + jy * gy + 0.5 * (hxx * gx * gx + 2.0 * hxy * gx * gy + hyy * gy * gy)
 
 
-def stationary_2x2_entries(phi: Any, q: Any) -> tuple[Any, Any, Any]:
-    """(p11, p12, p22) of the stationary P = Phi P Phi^T + Q of a 2 x 2 block: three linear
-    equations solved by Cramer's rule in plain arithmetic, so numpy floats and casadi expressions
-    (the casadi MAP's graph expands to SX; a linear-solver node would not) take the same formula."""
-    a, b, c, d = phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]
-    m = [[1 - a * a, -2 * a * b, -b * b], [-a * c, 1 - (a * d + b * c), -b * d], [-c * c, -2 * c * d, 1 - d * d]]
-    rhs = [q[0, 0], q[0, 1], q[1, 1]]
-
-    def det3(k):
-        return (
-            k[0][0] * (k[1][1] * k[2][2] - k[1][2] * k[2][1])
-            - k[0][1] * (k[1][0] * k[2][2] - k[1][2] * k[2][0])
-            + k[0][2] * (k[1][0] * k[2][1] - k[1][1] * k[2][0])
-        )
-
-    den = det3(m)
-    p11, p12, p22 = (
-        det3([[rhs[r] if col == j else m[r][col] for col in range(3)] for r in range(3)]) / den for j in range(3)
-    )
-    return p11, p12, p22
+@njit(cache=True)
+def _drive_mean_at(t, w, qx, qy, x0, jx, jy, hxx, hxy, hyy, out):  # pragma: no cover - compiled
+    """out[k] = x0 + J g + g'Hg/2 at any stamps t[k] (each sinusoid evaluated at each stamp)."""
+    for k in range(out.shape[0]):
+        rx = 0.0
+        ry = 0.0
+        for m in range(w.shape[0]):
+            c = math.cos(w[m] * t[k])
+            s = math.sin(w[m] * t[k])
+            rx += qx[m].real * c - qx[m].imag * s
+            ry += qy[m].real * c - qy[m].imag * s
+        gx = -ry
+        gy = rx
+        out[k] = x0 + jx * gx + jy * gy + 0.5 * (hxx * gx * gx + 2.0 * hxy * gx * gy + hyy * gy * gy)
 
 
-def _stationary_2x2(phi: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """P = Phi P Phi^T + Q for a 2x2 block (a hot path of the likelihood)."""
-    if not q.any():
-        return np.zeros((2, 2))
-    p11, p12, p22 = stationary_2x2_entries(phi, q)
-    return np.array([[p11, p12], [p12, p22]])
+def warm_up() -> None:
+    """Compile (or load from the on-disk cache) every compiled kernel a frame fit calls: the
+    likelihood, its per-sample and per-step forms, the replicate simulator and the drive mean, on a
+    64-sample series of the built-in frame scene (the same argument types as a real fit). `vibinverse
+    demo` runs it in a second process while the first one simulates, so that a fresh install's
+    compilation overlaps other work."""
+    from forward.scene_file import read_table
+    from vibinverse.io.builtin import builtin_scene
+    from vibinverse.io.series import validate
+
+    table = read_table(builtin_scene("roof_frame.toml"))
+    t = np.arange(64) / 200.0
+    y = np.random.default_rng(0).normal(size=t.size)
+    for times in (t, t + np.r_[0.0, np.full(t.size - 1, 1e-3)]):  # uniform and irregular stamps
+        model = FrameModel(table, validate(times, y, "warm-up"))
+        values = {"noise.sigma": 1.0}  # the rest from the scene
+        model.log_likelihood(values)
+        model.pointwise_log_likelihood(values)
+        model.replicate(values, np.random.default_rng(0))

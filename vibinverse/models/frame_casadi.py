@@ -6,8 +6,12 @@ checks that they agree to 1e-9), written in casadi expressions:
 - geometry (generalized tilt stiffness, mass and base-force rows) comes from
   `forward.motion.frame.linearize` with unit springs: every one of them is linear in k1 and b1;
 - the modal -> physical map k1 = M w^2 / 12, b1 = M zeta w / 6 of `FrameParameters.from_modal`;
-- the drive's steady state H(i w) and the closed-form zero-order-hold of a damped oscillator;
+- the drive's steady state H(i w) at the stamps, and the closed-form discretization of a damped
+  oscillator under continuous white noise (`vibinverse.kalman.oscillator_tables`, underdamped);
 - the Kalman recursion as one casadi step Function unrolled over the series by `mapaccum`.
+
+Irregular stamps: the discretization is one casadi Function mapped over the distinct steps, and
+each Kalman step takes its step's (Phi, Q) by column (`FrameModel`'s step table and index).
 """
 
 from __future__ import annotations
@@ -19,7 +23,6 @@ import casadi as ca
 import numpy as np
 
 from forward.motion.frame import FrameParameters, linearize
-from vibinverse.models.frame import stationary_2x2_entries
 from vibinverse.priors import casadi_log_prior, casadi_value
 from vibinverse.scene_keys import get_value
 
@@ -27,10 +30,22 @@ if TYPE_CHECKING:
     from vibinverse.posterior import Posterior
 
 
-def _stationary_2x2(phi, q):
-    """P = Phi P Phi^T + Q for 2 x 2 blocks, as a casadi expression (`stationary_2x2_entries`)."""
-    p11, p12, p22 = stationary_2x2_entries(phi, q)
-    return ca.vertcat(ca.horzcat(p11, p12), ca.horzcat(p12, p22))
+def _oscillator_step() -> ca.Function:
+    """(w, a, dt) -> (Phi, Q) of x = (q, q'), q'' + 2 a q' + w^2 q = xi, xi white of unit intensity,
+    over dt, each as a 4-vector in column order: the closed form of `vibinverse.kalman.oscillator_fill`
+    (underdamped; Q11's closed form without the small-step series, which it needs only below w dt
+    ~ 1e-3 to stay within 1e-10)."""
+    w, a, dt = ca.SX.sym("w"), ca.SX.sym("a"), ca.SX.sym("dt")
+    b = ca.sqrt(w * w - a * a)
+    ea = ca.exp(-a * dt)
+    us, uc = ea * ca.sin(b * dt) / b, ea * ca.cos(b * dt)
+    em = -ca.expm1(-2 * a * dt) / a  # (1 - e^{-2 a dt}) / a
+    phi = ca.vertcat(uc + a * us, -w * w * us, us, uc - a * us)
+    q12 = 0.5 * us * us
+    q = ca.vertcat(
+        (em - 2 * us * uc - 2 * a * us * us) / (4 * w * w), q12, q12, 0.25 * (em + 2 * us * uc - 2 * a * us * us)
+    )
+    return ca.Function("oscillator_step", [w, a, dt], [phi, q])
 
 
 class CasadiFrameObjective:
@@ -111,11 +126,11 @@ class CasadiFrameObjective:
             if "noise.sigma" in values
             else (get_value(self.like.base, "noise.sigma") if "noise" in self.like.base else 0.0)
         )  # as FrameLikelihood
-        phi, qm, p0 = self._tilt_blocks(w, zeta, k1, rms)
+        phi2, q2, kappas, p0 = self._tilt_blocks(w, zeta, k1, rms)
         # the data enter as a parameter, so that one compiled solver serves many series of one design
         y = ca.MX.sym("y", self.like.t.size)
         mask = ca.MX.sym("mask", self.like.t.size)
-        ll = self._kalman(y - mean, mask, phi, qm, sigma * sigma, p0)
+        ll = self._kalman(y - mean, mask, phi2, q2, kappas, sigma * sigma, p0)
         return ca.Function("neg_log_post", [z, y, mask], [-(log_prior + ll)])
 
     def data(self, series=None) -> ca.DM:
@@ -130,35 +145,41 @@ class CasadiFrameObjective:
         return float(self.function(z, d[:n], d[n:]))
 
     def _tilt_blocks(self, w, zeta, k1, rms):
-        """Closed-form ZOH (Phi, Q) and stationary P of each seen tilt mode (block diagonal)."""
-        dt = self.like.dt
-        n = 2 * len(self.seen)
-        phi, qm, p0 = ca.MX.zeros(n, n), ca.MX.zeros(n, n), ca.MX.zeros(n, n)
-        s = ca.sqrt(1 - zeta * zeta)
-        wd = w * s
-        e = ca.exp(-zeta * w * dt)
-        c, sn = ca.cos(wd * dt), ca.sin(wd * dt)
-        blk = ca.vertcat(
-            ca.horzcat(e * (c + zeta / s * sn), e * sn / wd), ca.horzcat(-e * w * w * sn / wd, e * (c - zeta / s * sn))
-        )
+        """Per Kalman step (columns; one column on a uniform grid) the unit-intensity (Phi, Q) of the
+        tilt oscillator as 4-vectors, each seen mode's noise intensity, and the stationary P0."""
+        like = self.like
+        a = zeta * w
+        disc = _oscillator_step()
+        if like.per_step:
+            # the Kalman step k updates with sample k, then predicts over t[k + 1] - t[k]
+            steps = like.steps
+            cols = np.append(like.step_index[1:], steps.size - 1)
+            phi_u, q_u = disc.map(steps.size)(w, a, ca.DM(steps).T)
+            phi2, q2 = phi_u[:, cols.tolist()], q_u[:, cols.tolist()]
+        else:
+            phi2, q2 = disc(w, a, like.dt)
+        kappas = []
+        p0 = ca.MX.zeros(2 * len(self.seen), 2 * len(self.seen))
         for b, i in enumerate(self.seen):
             m = self.unit.mass[i]
-            # Gamma = A^-1 (Phi - I) B, A = [[0, 1], [-w^2, -2 zeta w]], B = [0, 1/m]
-            a_inv = ca.vertcat(ca.horzcat(-2 * zeta / w, -1 / (w * w)), ca.horzcat(1, 0))
-            gam = ca.mtimes(a_inv, ca.mtimes(blk - ca.DM.eye(2), ca.DM([0.0, 1.0 / m])))
-            var = rms * rms * k1 * k1 * float(self.unit.force_spring[i] @ self.unit.force_spring[i])
-            qb = var * ca.mtimes(gam, gam.T)
-            pb = _stationary_2x2(blk, qb)
-            sl = slice(2 * b, 2 * b + 2)
-            phi[sl, sl], qm[sl, sl], p0[sl, sl] = blk, qb, 0.5 * (pb + pb.T)
-        return phi, qm, p0
+            # the base force's white-noise intensity: noise_rms^2 x the nominal step (`FrameModel`)
+            kap = rms * rms * like.dt * k1 * k1 * float(self.unit.force_spring[i] @ self.unit.force_spring[i]) / (m * m)
+            kappas.append(kap)
+            p0[2 * b, 2 * b] = kap / (4 * a * w * w)
+            p0[2 * b + 1, 2 * b + 1] = kap / (4 * a)
+        return phi2, q2, ca.vertcat(*kappas) if kappas else ca.MX.zeros(0, 1), p0
 
-    def _kalman(self, resid, mask, phi, qm, r, p0):
-        n = phi.shape[0]
+    def _kalman(self, resid, mask, phi2, q2, kappas, r, p0):
+        """The Kalman log-likelihood; step k takes column k of phi2 and q2 (or their one column):
+        each seen mode's block is that oscillator's (Phi, kappa_b Q)."""
+        n = 2 * len(self.seen)
         x = ca.SX.sym("x", n)
         p = ca.SX.sym("p", n, n)
         yk, mk = ca.SX.sym("y"), ca.SX.sym("m")
-        ph, qs, rs = ca.SX.sym("phi", n, n), ca.SX.sym("q", n, n), ca.SX.sym("r")
+        f2, g2, kap, rs = ca.SX.sym("phi", 4), ca.SX.sym("q", 4), ca.SX.sym("kappa", len(self.seen)), ca.SX.sym("r")
+        blk, qb = ca.reshape(f2, 2, 2), ca.reshape(g2, 2, 2)
+        ph = ca.diagcat(*[blk] * len(self.seen)) if self.seen else ca.SX(0, 0)
+        qs = ca.diagcat(*[kap[b] * qb for b in range(len(self.seen))]) if self.seen else ca.SX(0, 0)
         h = ca.DM(self.h)
         s = ca.mtimes([h.T, p, h]) + rs
         v = yk - ca.mtimes(h.T, x)
@@ -171,10 +192,10 @@ class CasadiFrameObjective:
         pn = ca.mtimes([ph, pu, ph.T]) + qs
         step = ca.Function(
             "kf",
-            [ca.vertcat(x, ca.reshape(p, n * n, 1), acc), yk, mk, ph, qs, rs],
+            [ca.vertcat(x, ca.reshape(p, n * n, 1), acc), yk, mk, f2, g2, kap, rs],
             [ca.vertcat(xn, ca.reshape(pn, n * n, 1), acc + ll)],
         )
         run = step.mapaccum("kf_all", resid.shape[0])
         init = ca.vertcat(ca.MX.zeros(n), ca.reshape(p0, n * n, 1), 0)
-        out = run(init, resid.T, mask.T, phi, qm, r)
+        out = run(init, resid.T, mask.T, phi2, q2, kappas, r)
         return out[-1, -1]

@@ -1,7 +1,9 @@
 """Spectral starting values of the frame model (sec. 4.2): the drive line from the most steady
 periodogram peak, the resonance from the residual's smoothed peak and its half-power width, and
 amplitudes calibrated through the forward model (its response per unit drive and per unit noise).
-Milliseconds, rough; the MAP decides between the candidates.
+Milliseconds, rough; the MAP decides between the candidates. Any stamps: the periodogram is the FFT
+on a uniform grid and Lomb-Scargle on irregular stamps (`vibinverse.spectrum.periodogram`), the
+sinusoids are least squares at the stamps.
 """
 
 from __future__ import annotations

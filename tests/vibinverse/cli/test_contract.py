@@ -47,7 +47,7 @@ def assert_contract(code: int, err: str, seconds: float, outputs: list[Path], be
         lines = err.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("vibinverse: error: "), err
         assert not left, f"left behind: {sorted(p.name for p in left)}"
-    assert not [p for p in left if p.name.endswith(".part")], left
+    assert not list(folder.rglob("*.part")), left  # no temporary file, in the output directories either
 
 
 def _finite_csv(path: Path) -> None:
@@ -96,12 +96,12 @@ VALUES = st.one_of(
 def test_simulate_with_any_scene_values_keeps_the_contract(tmp_path, overrides):
     folder = tmp_path / f"s{time.perf_counter_ns()}"
     folder.mkdir()
-    out = folder / "out.csv"
+    out = folder / "sim"
     sets = [a for k, v in overrides for a in ("--set", f"{k}={v}")]
     code, _, err, seconds = call("simulate", ROOF, *SMALL, *sets, "--seed", "1", "-o", str(out))
-    assert_contract(code, err, seconds, [out], set(), folder)
+    assert_contract(code, err, seconds, [out / "series.csv"], set(), folder)
     if code == 0:
-        _finite_csv(out)
+        _finite_csv(out / "series.csv")
 
 
 # ---------------------------------------------------------------- options
@@ -115,9 +115,9 @@ def test_simulate_with_any_scene_values_keeps_the_contract(tmp_path, overrides):
 def test_simulate_options_keep_the_contract(tmp_path, seed, rtol):
     folder = tmp_path / f"o{time.perf_counter_ns()}"
     folder.mkdir()
-    out = folder / "out.csv"
+    out = folder / "sim"
     code, _, err, seconds = call("simulate", ROOF, *SMALL, "--seed", str(seed), "--rtol", str(rtol), "-o", str(out))
-    assert_contract(code, err, seconds, [out], set(), folder)
+    assert_contract(code, err, seconds, [out / "series.csv"], set(), folder)
 
 
 # ---------------------------------------------------------------- data arrays (fit)
@@ -158,9 +158,9 @@ def test_fit_of_any_series_keeps_the_contract(tmp_path, data):
     path = folder / "data.csv"
     path.write_text("time,intensity\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(t, y)))
     before = set(folder.iterdir())
-    nc, js = folder / "r.nc", folder / "r.json"
+    nc, js = folder / "r" / "result.nc", folder / "r" / "summary.json"
     code, _, err, seconds = call(
-        "fit", str(path), "--scene", ROOF, *SMALL, "--method", "spectral", "-o", str(nc), "--summary", str(js)
+        "fit", str(path), "--scene", ROOF, *SMALL, "--method", "spectral", "-o", str(nc.parent)
     )
     assert_contract(code, err, seconds, [nc, js], before, folder)
     if code == 0:
@@ -173,9 +173,9 @@ def test_fit_of_any_series_keeps_the_contract(tmp_path, data):
 
 @pytest.mark.parametrize("path", sorted(p for p in (CORPUS / "scenes").glob("*") if p.is_file()), ids=lambda p: p.name)
 def test_bad_scene_files_are_one_line_errors(tmp_path, path):
-    out = tmp_path / "out.csv"
+    out = tmp_path / "sim"
     code, _, err, seconds = call("simulate", str(path), "-o", str(out))
-    assert_contract(code, err, seconds, [out], set(), tmp_path)
+    assert_contract(code, err, seconds, [out / "series.csv"], set(), tmp_path)
     assert code == 2
 
 
@@ -184,10 +184,8 @@ def test_bad_scene_files_are_one_line_errors(tmp_path, path):
 )
 def test_data_files_of_the_corpus_keep_the_contract(tmp_path, path):
     """bad_* files are refused with one line; the others may fit or be refused, never a traceback."""
-    nc, js = tmp_path / "r.nc", tmp_path / "r.json"
-    code, _, err, seconds = call(
-        "fit", str(path), "--scene", ROOF, "--method", "spectral", "-o", str(nc), "--summary", str(js)
-    )
+    nc, js = tmp_path / "r" / "result.nc", tmp_path / "r" / "summary.json"
+    code, _, err, seconds = call("fit", str(path), "--scene", ROOF, "--method", "spectral", "-o", str(nc.parent))
     assert_contract(code, err, seconds, [nc, js], set(), tmp_path)
     if path.name.startswith("bad_") or path.suffix == ".nc":
         assert code == 2

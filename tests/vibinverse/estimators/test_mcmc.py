@@ -72,15 +72,15 @@ def test_interrupted_run_resumes_to_the_same_samples(short_data):
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130 and "resume with --resume" in err and "Traceback" not in err, err
-    assert not (d / "cut.nc").exists()
-    with h5py.File(d / "cut.chain.h5", "r") as f:
+    assert not (d / "cut" / "result.nc").exists()
+    with h5py.File(d / "cut" / "result.chain.h5", "r") as f:
         assert 0 < f["mcmc"].attrs["iteration"] < steps  # really interrupted mid-run
     resumed = run_cli(*fit_args(d, "cut", "--resume", steps=steps))
     assert resumed.returncode == 0, resumed.stderr
-    with h5py.File(d / "full800.chain.h5", "r") as a, h5py.File(d / "cut.chain.h5", "r") as b:
+    with h5py.File(d / "full800" / "result.chain.h5", "r") as a, h5py.File(d / "cut" / "result.chain.h5", "r") as b:
         assert a["mcmc"].attrs["iteration"] == b["mcmc"].attrs["iteration"] == steps
         np.testing.assert_array_equal(a["mcmc/chain"][...], b["mcmc/chain"][...])
-    assert json.loads((d / "cut.json").read_text())["diagnostics"]["n_steps"] == steps
+    assert json.loads((d / "cut" / "summary.json").read_text())["diagnostics"]["n_steps"] == steps
 
 
 def _interrupt(d, name, sig, *extra, steps=800):
@@ -109,7 +109,7 @@ def test_sigterm_exits_143_and_workers_stop_without_tracebacks(short_data):
     # with a pool, Ctrl-C reaches the workers too (one process group): they leave it to the parent
     code, err = _interrupt(d, "pool", signal.SIGINT, "--workers", "2")
     assert code == 130 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
-    assert not (d / "pool.nc").exists() and not (d / "term.nc").exists()
+    assert not (d / "pool" / "result.nc").exists() and not (d / "term" / "result.nc").exists()
 
 
 def test_resume_refuses_a_checkpoint_of_other_data_scene_or_priors(short_data, tmp_path):
@@ -117,22 +117,22 @@ def test_resume_refuses_a_checkpoint_of_other_data_scene_or_priors(short_data, t
     first = run_cli(*fit_args(d, "ident", steps=100))
     assert first.returncode == 0, first.stderr
     other = tmp_path / "other.csv"
-    text = (d / "data.csv").read_text().splitlines()
+    text = (d / "series.csv").read_text().splitlines()
     k = next(i for i, ln in enumerate(text) if ln and ln[0].isdigit())
     t, y, *rest = text[k + 5].split(",")
     text[k + 5] = ",".join([t, repr(float(y) + 1e-3), *rest])  # one sample changed
     other.write_text("\n".join(text) + "\n")
-    chain = str(d / "ident.chain.h5")
-    before = (d / "ident.chain.h5").read_bytes()
+    chain = str(d / "ident" / "result.chain.h5")
+    before = (d / "ident" / "result.chain.h5").read_bytes()
     args = fit_args(d, "ident2", "--resume", "--chain", chain, steps=200)
-    r = run_cli(*[str(other) if a == str(d / "data.csv") else a for a in args])
+    r = run_cli(*[str(other) if a == str(d / "series.csv") else a for a in args])
     assert r.returncode == 2 and "other data" in r.stderr and "Traceback" not in r.stderr, r.stderr
     r = run_cli(*args, "--free", "noise.sigma=loguniform(1e-3, 1)")
     assert r.returncode == 2 and "other free parameters" in r.stderr, r.stderr
     r = run_cli(*args, "--set", "sensor.inclination=pi/3+0.012")
     assert r.returncode == 2 and "other scene" in r.stderr, r.stderr
-    assert (d / "ident.chain.h5").read_bytes() == before  # refused before touching the checkpoint
-    assert not (d / "ident2.nc").exists()
+    assert (d / "ident" / "result.chain.h5").read_bytes() == before  # refused before touching the checkpoint
+    assert not (d / "ident2" / "result.nc").exists()
 
 
 def test_a_corrupt_or_foreign_checkpoint_is_a_one_line_error(short_data, tmp_path):

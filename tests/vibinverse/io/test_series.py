@@ -44,6 +44,54 @@ def test_bad_series(t, x, message):
         validate(t, x)
 
 
+@pytest.mark.parametrize(
+    "t, message",
+    [
+        (30.0 - np.arange(30.0), r"^data: time must be strictly increasing \(sample 1: 29 after 30\)$"),
+        (np.r_[np.arange(10.0), 9.0, np.arange(11.0, 30.0)], r"\(sample 10: 9 after 9\)$"),
+        # stamps that print alike at 6 digits are written with the digits that tell them apart
+        (
+            1e5 + np.r_[np.arange(10) * 1e-3, 9e-3 - 1e-9, np.arange(11, 30) * 1e-3],
+            r"100000\.008999999 after 100000\.009",
+        ),
+    ],
+)
+def test_stamps_that_do_not_increase_are_one_line_naming_the_sample_and_both_stamps(t, message):
+    with pytest.raises(DataError, match=message) as err:
+        validate(t, np.sin(np.arange(t.size)))
+    assert "\n" not in str(err.value)
+
+
+def test_irregular_stamps_are_accepted_and_described():
+    """Jitter of +-20 % of a frame and 10 % dropped frames: not uniform, and described (median
+    step, jitter as the RMS deviation from the regular grid, dropped frames) by describe() and in
+    the notes; a drifting clock is a grid; uniform stamps (within UNIFORM_RTOL) get no note."""
+    from vibinverse.io.series import UNIFORM_RTOL, sampling_summary
+
+    rng = np.random.default_rng(0)
+    n, dt = 4000, 0.005
+    keep = rng.random(n) >= 0.1
+    jitter = rng.uniform(-0.2, 0.2, n)
+    t = ((np.arange(n) + jitter) * dt)[keep]
+    s = validate(t, np.sin(t), "jittered")
+    assert not s.uniform
+    step, rms, dropped = sampling_summary(s.time)
+    inside = np.flatnonzero(keep)
+    assert dropped == inside[-1] - inside[0] + 1 - keep.sum()  # the frames missing inside the record
+    assert rms == pytest.approx(0.2 / np.sqrt(3), rel=0.05)  # uniform in +-0.2: rms 0.2 / sqrt(3)
+    line = f"irregular sampling: median step {step:.6g} s, jitter {100 * rms:.3g} % (rms), {dropped} dropped frames"
+    assert line in s.describe() and s.notes == [f"time: {line}"]
+    # a clock that runs 0.1 % fast from 5 s on, frames dropped: a grid, no jitter
+    clock = validate(5.0 + np.flatnonzero(keep) * dt * 1.001, np.sin(np.arange(keep.sum())))
+    assert sampling_summary(clock.time)[1:] == (pytest.approx(0.0, abs=1e-9), dropped)
+    almost = validate(
+        np.arange(100) * 0.01 + 0.5 * UNIFORM_RTOL * 0.01 * (-1.0) ** np.arange(100), np.sin(np.arange(100.0))
+    )
+    assert almost.uniform and almost.notes == [] and "uniform at" in almost.describe()
+    off = validate(np.arange(100) * 0.01 + 2 * UNIFORM_RTOL * 0.01 * (-1.0) ** np.arange(100), np.sin(np.arange(100.0)))
+    assert not off.uniform and "irregular sampling" in off.notes[0]
+
+
 def test_series_too_short_or_too_slow_for_a_frequency():
     s = validate(np.arange(100) * 0.01, np.sin(np.arange(100)))
     with pytest.raises(VibinverseError, match="Nyquist"):
@@ -351,11 +399,11 @@ def test_cli_fit_reads_named_columns_and_fs(tmp_path, plate):
     p.write_text("frame;Pixel\n" + "".join(f"{i};{float(x)!r}\n" for i, x in enumerate(obs.intensity)))
     out, err = io.StringIO(), io.StringIO()
     args = ["fit", str(p), "--scene", str(ROOF_ELASTIC), "--method", "spectral", "--no-progress", "-q"]
-    files = ["-o", str(tmp_path / "r.nc"), "--summary", str(tmp_path / "r.json")]
+    files = ["-o", str(tmp_path)]
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         assert main([*args, "--value-column", "pixel", "--fs", "1000", *files]) == 0
         assert main([*args, "--fs", "1000", *files]) == 2  # two columns, none named intensity
-    summary = json.loads((tmp_path / "r.json").read_text())
+    summary = json.loads((tmp_path / "summary.json").read_text())
     _same_fit({k: v["median"] for k, v in summary["parameters"].items()}, want)
     lines = err.getvalue().strip().splitlines()
     assert len(lines) == 1 and "no value column intensity" in lines[0] and "--value-column" in lines[0]

@@ -1,0 +1,238 @@
+"""The modal model (`vibinverse.models.modal`): exact discretization of every block against the
+matrix exponential, the block filter against the plain numpy Kalman filter (gaps, irregular stamps,
+the held gain), the per-sample densities, label switching, replicates, units and the Fisher
+information of a case with a closed form."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+import vibinverse as vi
+from vibinverse.kalman import log_likelihood_steps_reference
+from vibinverse.models import MODELS, model_class_for
+from vibinverse.models.modal import ModalModel, ModalSpec, _block_filter, _fill_tables, _oscillator
+
+
+def van_loan(a: np.ndarray, gq: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Phi, Q) of x' = A x + w, E[w w^T] = gq delta, over dt, by scipy's expm (Van Loan 1978)."""
+    n = a.shape[0]
+    m = np.zeros((2 * n, 2 * n))
+    m[:n, :n], m[:n, n:], m[n:, n:] = -a, gq, a.T
+    e = expm(m * dt)
+    phi = e[n:, n:].T
+    return phi, phi @ e[:n, n:]
+
+
+@pytest.mark.parametrize(
+    ("f", "zeta", "dt"),
+    [
+        (2.0, 0.01, 0.05),  # the test series' modes at 20 Hz
+        (1.6, 0.03, 0.05),
+        (9.9, 0.001, 0.05),  # near Nyquist, lightly damped
+        (0.015, 0.2, 0.05),  # 3 cycles in 200 s: w dt = 5e-3, the series branch of Q11
+        (0.5, 0.9, 0.001),  # heavily damped, short step
+        (3.0, 1.0, 0.05),  # critical
+        (3.0, 1.7, 0.05),  # overdamped
+        (1.0, 1e-4, 0.3),
+        (0.49 / (2 * math.pi * 0.05), 0.05, 0.05),  # just inside the series branch (rate dt = 0.49)
+        (0.51 / (2 * math.pi * 0.05), 0.05, 0.05),  # just inside the closed form
+        (0.2, 2.5, 0.05),  # overdamped, its fast rate decides the branch
+    ],
+)
+def test_oscillator_discretization_matches_expm(f, zeta, dt):
+    w, rms = 2 * math.pi * f, 0.7
+    a = zeta * w
+    kappa = 4 * a * w * w * rms * rms
+    phi, q = np.zeros((2, 2)), np.zeros((2, 2))
+    _oscillator(w, a, kappa, dt, phi, q, 0)
+    ref_phi, ref_q = van_loan(np.array([[0.0, 1.0], [-w * w, -2 * a]]), np.diag([0.0, kappa]), dt)
+    assert np.abs(phi - ref_phi).max() <= 1e-10 * np.abs(ref_phi).max()
+    assert np.abs(q - ref_q).max() <= 1e-10 * np.abs(ref_q).max()
+    assert abs(q[0, 0] - ref_q[0, 0]) <= 1e-10 * ref_q[0, 0]  # the element that cancels at short steps
+
+
+def test_every_block_matches_expm():
+    """Modes, the random walk, the integrated walk and an Ornstein-Uhlenbeck state, filled in one
+    call for two steps, against the Van Loan exponential of the stacked system."""
+    kinds = np.array([0, 1, 2, 3], dtype=np.int64)
+    offsets = np.array([0, 2, 3, 5], dtype=np.int64)
+    w, a, rms, rate2, tau, var = 2 * math.pi * 2.1, 0.02 * 2 * math.pi * 2.1, 0.8, 0.09, 0.4, 1.7
+    pars = np.array([[w, a, rms], [rate2, 0, 0], [rate2, 0, 0], [tau, var, 0]], dtype=float)
+    steps = np.array([0.05, 0.13])
+    phis, qs, p0 = np.zeros((2, 6, 6)), np.zeros((2, 6, 6)), np.zeros((6, 6))
+    _fill_tables(kinds, pars, offsets, steps, phis, qs, p0)
+    big = np.zeros((6, 6))
+    big[:2, :2] = [[0, 1], [-w * w, -2 * a]]
+    big[3, 4] = 1.0
+    big[5, 5] = -1 / tau
+    gq = np.diag([0, 4 * a * w * w * rms * rms, rate2, 0, rate2, 2 * var / tau])
+    for u, dt in enumerate(steps):
+        ref_phi, ref_q = van_loan(big, gq, dt)
+        assert np.allclose(phis[u], ref_phi, rtol=0, atol=1e-10 * np.abs(ref_phi).max())
+        for blk in (slice(0, 2), slice(2, 3), slice(3, 5), slice(5, 6)):
+            r = ref_q[blk, blk]
+            assert np.abs(qs[u][blk, blk] - r).max() <= 1e-10 * np.abs(r).max()
+    assert np.allclose(np.diag(p0), [rms**2, (w * rms) ** 2, 0, 0, 0, var])
+
+
+def series_of(n=3000, fs=20.0, seed=0, gaps=0.0, jitter=0.0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    if jitter:
+        t = t + rng.uniform(0, jitter / fs, n)
+        t[rng.random(n) < 0.02] += 0.3 / fs  # a few late frames
+        t = np.sort(t)
+    y = 2.0 + np.cos(2 * np.pi * 2.1 * t) * 0.5 + rng.normal(size=n)
+    y[rng.random(n) < gaps] = np.nan
+    return vi.series(t, y)
+
+
+SPEC = {"modes": 2, "lines": 1, "drift": True, "noise": "ar1"}
+VALUES = {
+    "level": 2.0,
+    "modes[0].frequency": 1.3,
+    "modes[0].damping_ratio": 0.02,
+    "modes[0].rms": 0.4,
+    "modes[1].frequency": 3.7,
+    "modes[1].damping_ratio": 0.05,
+    "modes[1].rms": 0.3,
+    "lines[0].frequency": 2.1,
+    "lines[0].amplitude": 0.5,
+    "lines[0].phase": 0.3,
+    "drift.rate": 0.01,
+    "ar.rms": 0.3,
+    "ar.time": 0.4,
+    "noise.sigma": 0.8,
+}
+
+
+@pytest.mark.parametrize(
+    ("spec", "gaps", "jitter"),
+    [
+        (SPEC, 0.0, 0.0),
+        (SPEC, 0.1, 0.0),
+        ({**SPEC, "noise": "1/f", "drift": "integrated"}, 0.05, 0.0),
+        (SPEC, 0.05, 0.2),  # irregular stamps: a (Phi, Q) per distinct step
+        ({"modes": 0, "lines": 0}, 0.0, 0.0),
+    ],
+)
+def test_filter_matches_the_numpy_kalman_filter(spec, gaps, jitter):
+    """The compiled block filter, with and without the held gain, against the plain numpy filter of
+    `vibinverse.kalman` on the same tables; the per-sample densities sum to the likelihood."""
+    s = series_of(gaps=gaps, jitter=jitter)
+    m = ModalModel({"modal": spec}, s)
+    values = {
+        **{n: v for n, v in VALUES.items() if n in m.fittable()},
+        "drift.rate": 0.01 if spec.get("drift") != "integrated" else 1e-3,
+        "flicker.rms": 0.3,
+    }
+    values = {n: values[n] for n in m.fittable()}
+    assert s.uniform is (jitter == 0.0)
+    mean, phis, qs, r = m.tables(values)
+    ref = log_likelihood_steps_reference(s.intensity - mean, phis, qs, m.idx, m.h, r, m._p0)
+    ll = m.log_likelihood(values)
+    full = m._run(values, np.empty(0), np.empty(0), freeze=False)
+    assert ll == pytest.approx(ref, rel=1e-10, abs=1e-7)
+    assert full == pytest.approx(ref, rel=1e-12, abs=1e-8)
+    point = m.pointwise_log_likelihood(values)
+    assert np.isnan(point[s.gaps]).all() and np.isfinite(point[~s.gaps]).all()
+    assert abs(np.nansum(point) - ll) <= 1e-9 * abs(ll)
+    e = m.residuals(values)
+    assert np.isnan(e[s.gaps]).all()
+
+
+def test_held_gain_saves_work_and_keeps_the_numbers():
+    """A long uniform record: the gain is held once the covariance has converged (O(T n) from
+    there); the likelihood agrees with the full recursion to 1e-12 relative."""
+    s = series_of(n=36000)
+    m = ModalModel({"modal": {"modes": 3}}, s)
+    values = {
+        "level": 2.0,
+        **{f"modes[{i}].frequency": f for i, f in enumerate((1.6, 2.1, 2.7))},
+        **{f"modes[{i}].damping_ratio": 0.02 for i in range(3)},
+        **{f"modes[{i}].rms": 0.5 for i in range(3)},
+        "noise.sigma": 1.0,
+    }
+    mean, phis, qs, r = m.tables(values)
+    e = np.empty(0)
+    args = (s.intensity - mean, phis, qs, m.idx, m.lo, m.hi, m.h, r, m._p0)
+    held, full = _block_filter(*args, True, e, e), _block_filter(*args, False, e, e)
+    assert held == pytest.approx(full, rel=1e-12)
+
+
+def test_modes_and_lines_are_ordered_by_frequency():
+    s = series_of()
+    m = ModalModel({"modal": SPEC}, s)
+    assert math.isfinite(m.log_likelihood(VALUES))
+    swapped = {**VALUES, "modes[0].frequency": 3.7, "modes[1].frequency": 1.3}
+    assert m.log_likelihood(swapped) == -math.inf
+    m2 = ModalModel({"modal": {"lines": 2}}, s)
+    two = {"level": 2.0, "noise.sigma": 1.0, "lines[0].phase": 0.0, "lines[1].phase": 0.0}
+    two |= {"lines[0].amplitude": 0.5, "lines[1].amplitude": 0.2}
+    assert math.isfinite(m2.log_likelihood({**two, "lines[0].frequency": 2.1, "lines[1].frequency": 4.0}))
+    assert m2.log_likelihood({**two, "lines[0].frequency": 4.0, "lines[1].frequency": 2.1}) == -math.inf
+
+
+def test_registry_table_and_priors():
+    assert MODELS["modal"] is ModalModel
+    assert model_class_for({"modal": {"modes": 3}}) is ModalModel
+    spec = ModalSpec.from_table({"modal": {"modes": 3, "drift": True, "noise": "ar1"}})
+    assert spec == ModalSpec(3, 0, "walk", "ar1")
+    with pytest.raises(vi.SceneError, match=r"modal\.noise"):
+        ModalSpec.from_table({"modal": {"noise": "pink"}})
+    with pytest.raises(vi.SceneError, match=r"modal\.modes"):
+        ModalSpec.from_table({"modal": {"modes": -1}})
+    s = series_of()
+    m = ModalModel({"modal": SPEC}, s)
+    priors = m.default_priors()
+    assert list(priors) == ModalSpec(2, 1, "walk", "ar1").names()
+    assert priors["modes[1].frequency"].bounds == pytest.approx((3.0 / (s.time[-1] - s.time[0]), 10.0))
+    assert priors["modes[0].damping_ratio"].bounds == (1e-4, 0.9)
+    assert priors["lines[0].amplitude"].bounds[1] == pytest.approx(3 * np.nanstd(s.intensity))
+    assert priors["lines[0].phase"].bounds == (-math.pi, math.pi)
+    assert m.units("modes[0].rms")[0] == "1" and m.units("modes[0].frequency")[0] == "Hz"
+    assert m.units("drift.rate")[0] == "1 s-0.5" and m.units("ar.time")[0] == "s"
+    assert m.units("lines[0].amplitude") == ("1", "line amplitude")
+    tests = m.line_tests(VALUES, list(priors))
+    assert [t.label for t in tests] == ["line_0", "mode_0", "mode_1"]
+    assert tests[0].null == {"lines[0].amplitude": 0.0} and tests[1].null == {"modes[0].rms": 0.0}
+
+
+def test_replicate_has_the_model_variance():
+    """Replicates (compiled, one pass each) have the stationary variance sum rms^2 + sigma^2 and the
+    data's gaps."""
+    s = series_of(n=4000, gaps=0.05)
+    m = ModalModel({"modal": {"modes": 2, "noise": "ar1"}}, s)
+    values = {n: VALUES[n] for n in m.fittable()}
+    rng = np.random.default_rng(5)
+    reps = np.array([m.replicate(values, rng) for _ in range(40)])
+    assert np.isnan(reps[:, s.gaps]).all()
+    var = 0.4**2 + 0.3**2 + 0.3**2 + 0.8**2
+    assert np.nanmean(reps) == pytest.approx(2.0, abs=0.03)
+    assert np.nanvar(reps) == pytest.approx(var, rel=0.05)
+
+
+def test_fisher_of_white_noise_has_its_closed_form():
+    """White noise plus a level: -d2 ln L at the MLE is n / sigma^2 (level) and 2 n / sigma^2 (sigma)."""
+    s = series_of(n=2000)
+    y = s.intensity
+    m = ModalModel({"modal": {}}, s)
+    values = {"level": float(np.mean(y)), "noise.sigma": float(np.std(y))}
+    f = m.fisher(values, ["level", "noise.sigma"])
+    n, sig2 = y.size, values["noise.sigma"] ** 2
+    assert f[0, 0] == pytest.approx(n / sig2, rel=1e-4)
+    assert f[1, 1] == pytest.approx(2 * n / sig2, rel=1e-4)
+    assert abs(f[0, 1]) < 1e-3 * f[0, 0]
+
+
+def test_spectral_guesses_find_the_peaks():
+    rng = np.random.default_rng(3)
+    t = np.arange(4000) / 20.0
+    y = 0.8 * np.cos(2 * np.pi * 4.2 * t + 1.0) + rng.normal(size=t.size)
+    m = ModalModel({"modal": {"lines": 1}}, vi.series(t, y))
+    g = m.guesses(m.default_priors())[0]
+    assert g["lines[0].frequency"] == pytest.approx(4.2, abs=2e-3)
+    assert g["lines[0].amplitude"] == pytest.approx(0.8, rel=0.1)
+    assert g["noise.sigma"] == pytest.approx(1.0, rel=0.1)

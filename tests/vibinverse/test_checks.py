@@ -1,0 +1,65 @@
+"""Residual checks: white Gaussian residuals pass at the promised rate; coloured or heavy-tailed ones fail."""
+
+import numpy as np
+from scipy import stats
+
+from vibinverse.checks import ALPHA, autocorrelation, describes_data, ljung_box, residual_checks
+
+
+def _binomial_upper(n: int, p: float) -> float:
+    """The fraction of n trials at rate p that is exceeded with probability 1e-3."""
+    return stats.binom.ppf(1 - 1e-3, n, p) / n
+
+
+def test_white_gaussian_residuals_pass_at_the_promised_rate():
+    rng = np.random.default_rng(0)
+    n_sets = 300
+    failed_white = failed_normal = 0
+    for _ in range(n_sets):
+        c = residual_checks(rng.standard_normal(2000))
+        failed_white += not c["white"]
+        failed_normal += not c["normal"]
+    # each check fails with probability ALPHA on a model that describes the data
+    assert failed_white / n_sets <= _binomial_upper(n_sets, ALPHA)
+    assert failed_normal / n_sets <= _binomial_upper(n_sets, ALPHA)
+
+
+def test_ljung_box_q_is_chi_squared_under_the_null():
+    rng = np.random.default_rng(1)
+    qs = np.array([ljung_box(rng.standard_normal(1000), lags=10)[0] for _ in range(400)])
+    # chi2(10): mean 10, sd sqrt(20); the mean of 400 draws has sd 0.22
+    assert abs(qs.mean() - 10.0) < 4 * np.sqrt(20 / 400)
+
+
+def test_coloured_and_heavy_tailed_residuals_fail():
+    rng = np.random.default_rng(2)
+    e = rng.standard_normal(3000)
+    ar = np.empty_like(e)
+    ar[0] = e[0]
+    for k in range(1, e.size):  # AR(1), phi = 0.3: a model that missed coloured noise
+        ar[k] = 0.3 * ar[k - 1] + e[k]
+    c = residual_checks(ar / ar.std())
+    assert not c["white"] and c["ljung_box_p"] < 1e-10
+    assert "not white" in describes_data(c)
+    t = rng.standard_t(3, size=3000)  # heavy tails: outliers
+    c = residual_checks(t / t.std())
+    assert c["white"] and not c["normal"]
+    assert "not Gaussian" in describes_data(c)
+
+
+def test_gaps_are_skipped_not_filled():
+    rng = np.random.default_rng(3)
+    e = rng.standard_normal(4000)
+    ar = e.copy()
+    ar[1:] += 0.5 * e[:-1]  # MA(1): rho_1 = 0.4, rho_2 = 0
+    holed = ar.copy()
+    holed[rng.random(ar.size) < 0.2] = np.nan
+    rho = autocorrelation(holed, 2)
+    # 0.4 at lag 1 and 0 at lag 2, each to ~3 sd of a 3000-sample estimate (sd ~0.02)
+    assert abs(rho[0] - 0.4) < 0.06 and abs(rho[1]) < 0.06
+    assert residual_checks(np.where(np.isnan(holed), np.nan, e))["white"]
+
+
+def test_too_few_residuals_give_no_verdict():
+    assert residual_checks(np.ones(10)) == {}
+    assert describes_data({}) is None

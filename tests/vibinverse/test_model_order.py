@@ -1,0 +1,190 @@
+"""The modal model's order chosen by BIC (`vibinverse.model_order`) and the scene-less `vi.fit`.
+
+The series are simulated here, independently of the model's own code: each resonance by the exact
+discretization (scipy's matrix exponential, Van Loan) on a grid 5 times finer than the samples,
+then decimated; AR(1) noise by scipy.signal.lfilter; a random walk by a cumulative sum. Fixed
+seeds."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+from scipy.signal import lfilter
+
+import vibinverse as vi
+from vibinverse.model_order import choose_order, sort_labels
+from vibinverse.models.modal import ModalSpec
+
+FS = 20.0
+
+
+def mode_tables(f: float, zeta: float, rms: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    w = 2 * np.pi * f
+    a = np.array([[0.0, 1.0], [-w * w, -2 * zeta * w]])
+    m = np.zeros((4, 4))
+    m[:2, :2], m[:2, 2:], m[2:, 2:] = -a, np.diag([0.0, 4 * zeta * w**3 * rms**2]), a.T
+    e = expm(m * dt)
+    phi = e[2:, 2:].T
+    q = phi @ e[:2, 2:]
+    return phi, 0.5 * (q + q.T)
+
+
+def simulate(n, modes=(), sigma=1.0, seed=0, lines=(), ar=None, drift=None, level=0.0, sub=5):
+    """(time, intensity) at FS: resonances (f, zeta, rms) exact on a grid `sub` times finer, lines
+    (f, amplitude, phase), AR(1) noise (phi, rms) per sample, a random walk of `drift` per sqrt(s),
+    white noise sigma."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / FS
+    fine = (n - 1) * sub + 1
+    y = np.full(n, float(level))
+    for f, zeta, rms in modes:
+        phi, q = mode_tables(f, zeta, rms, 1 / (FS * sub))
+        root = np.linalg.cholesky(q)
+        z = rng.normal(size=(fine, 2)) @ root.T
+        x = np.array([rms * rng.normal(), 2 * np.pi * f * rms * rng.normal()])
+        out = np.empty(fine)
+        for k in range(fine):
+            if k:
+                x = phi @ x + z[k]
+            out[k] = x[0]
+        y += out[::sub]
+    for f, a, ph in lines:
+        y += a * np.cos(2 * np.pi * f * t + ph)
+    if ar is not None:
+        p, rms = ar
+        e = rng.normal(size=n) * rms * math.sqrt(1 - p * p)
+        y += lfilter([1.0], [1.0, -p], e, zi=[p * rms * rng.normal()])[0]
+    if drift is not None:
+        y += np.concatenate([[0.0], np.cumsum(rng.normal(size=n - 1) * drift / math.sqrt(FS))])
+    return t, y + sigma * rng.normal(size=n)
+
+
+def freqs(result, kind="mode"):
+    return [c["frequency"] for c in result.components if c["kind"] == kind]
+
+
+def test_white_noise_has_no_modes_and_no_lines():
+    t, y = simulate(3000, sigma=1.3, level=5.0, seed=4)
+    res = choose_order(vi.series(t, y))
+    assert res.spec == ModalSpec(0, 0, "none", "white")
+    assert res.criterion[0]["kept"] and not any(r["kept"] for r in res.criterion[1:])
+    assert {"mode", "line", "drift (random walk)", "AR(1) noise", "1/f noise"} <= {
+        r["tried"].split(" at ")[0] for r in res.criterion
+    }
+    comps = {c["kind"]: c for c in res.components}
+    assert comps["white noise"]["sigma"] == pytest.approx(1.3, rel=0.05)
+    assert comps["level"]["level"] == pytest.approx(5.0, abs=0.1)
+
+
+def test_vi_fit_without_a_scene_searches_what_the_table_leaves_open():
+    """`vi.fit(series)` and `vi.fit(series, {"modal": {"lines": 0}})` on white noise: the order
+    search runs (its table in the diagnostics), the fixed count is not searched."""
+    t, y = simulate(1500, sigma=0.7, level=1.0, seed=5)
+    free = vi.fit(vi.series(t, y), method="map")
+    assert any(r["tried"].startswith("line") for r in free.diagnostics["model_order"])
+    assert [c["kind"] for c in free.data["components"]] == ["level", "white noise"]
+    fixed = vi.fit(vi.series(t, y), {"modal": {"lines": 0}}, method="map")
+    tried = [r["tried"] for r in fixed.diagnostics["model_order"]]
+    assert tried and not any(w.startswith("line") for w in tried)
+    assert fixed.summary()["parameters"]["noise.sigma"]["map"] == pytest.approx(0.7, rel=0.05)
+
+
+def test_a_line_and_a_mode_are_found_as_a_line_and_a_mode():
+    t, y = simulate(3000, modes=[(2.3, 0.02, 0.6)], sigma=0.5, lines=[(5.1, 0.15, 0.7)], seed=0)
+    res = choose_order(vi.series(t, y))
+    assert (res.spec.modes, res.spec.lines, res.spec.drift, res.spec.noise) == (1, 1, "none", "white")
+    assert freqs(res)[0] == pytest.approx(2.3, rel=0.02)
+    assert freqs(res, "line")[0] == pytest.approx(5.1, abs=1e-3)
+    line = next(c for c in res.components if c["kind"] == "line")
+    assert line["amplitude"] == pytest.approx(0.15, rel=0.2) and line["harmonic_of"] is None
+
+
+def test_a_harmonic_is_recorded_as_one_source():
+    t, y = simulate(2000, sigma=0.5, lines=[(1.5, 0.3, 0.2), (3.0, 0.2, -1.0)], seed=2)
+    res = choose_order(vi.series(t, y), {"modal": {"modes": 0, "drift": False, "noise": "white"}})
+    assert res.spec.lines == 2
+    lines = [c for c in res.components if c["kind"] == "line"]
+    assert lines[0]["frequency"] == pytest.approx(1.5, abs=2e-3) and lines[0]["harmonic_of"] is None
+    assert (lines[1]["harmonic_of"], lines[1]["harmonic"]) == (0, 2)
+    assert not any(r["tried"].startswith(("mode", "drift", "AR", "1/f")) for r in res.criterion)  # fixed: not searched
+
+
+def test_irregular_stamps():
+    """Jittered frames: the likelihood takes a (Phi, Q) per distinct step; the candidates come from
+    the spectrum on the median step. A line at 3.3 Hz in white noise is found as one line."""
+    rng = np.random.default_rng(7)
+    t = np.sort(np.arange(2000) / FS + rng.uniform(0, 0.2 / FS, 2000))
+    y = 0.5 * np.cos(2 * np.pi * 3.3 * t + 0.4) + rng.normal(size=t.size)
+    series = vi.series(t, y)
+    assert not series.uniform
+    res = choose_order(series)
+    assert res.spec == ModalSpec(0, 1, "none", "white")
+    assert freqs(res, "line")[0] == pytest.approx(3.3, abs=2e-3)
+
+
+def test_ar1_noise_and_one_mode():
+    t, y = simulate(3000, modes=[(2.3, 0.02, 0.6)], sigma=0.3, ar=(0.9, 1.0), seed=0)
+    res = choose_order(vi.series(t, y))
+    assert (res.spec.modes, res.spec.lines, res.spec.drift, res.spec.noise) == (1, 0, "none", "ar1")
+    assert freqs(res)[0] == pytest.approx(2.3, rel=0.02)
+    ar = next(c for c in res.components if c["kind"] == "coloured noise")
+    assert math.exp(-1 / (FS * ar["time"])) == pytest.approx(0.9, abs=0.03)  # phi = exp(-dt / time)
+
+
+def test_random_walk_drift_and_one_mode():
+    t, y = simulate(3000, modes=[(2.3, 0.02, 0.6)], sigma=0.5, drift=0.3, seed=0)
+    res = choose_order(vi.series(t, y))
+    assert (res.spec.modes, res.spec.lines, res.spec.drift, res.spec.noise) == (1, 0, "walk", "white")
+    assert freqs(res)[0] == pytest.approx(2.3, rel=0.02)
+    drift = next(c for c in res.components if c["kind"] == "drift")
+    assert drift["rate"] == pytest.approx(0.3, rel=0.2)
+
+
+THREE = [(1.6, 0.01, 1.0), (2.1, 0.02, 0.7), (2.7, 0.03, 0.5)]
+
+
+@pytest.mark.slow
+def test_three_ambient_modes_through_vi_fit():
+    """200 s at 20 Hz, three modes with 1-3 % damping in white noise, no scene: `vi.fit` (default
+    method "auto": order search, MAP, emcee) chooses 3 modes and 0 lines, each frequency within
+    1 %, each damping ratio inside its 90 % posterior interval; the criterion table and the
+    components are in the result, JSON-able (11-27 s on a loaded 2-core machine, most of it emcee)."""
+    t, y = simulate(4000, modes=THREE, sigma=0.5, seed=1)
+    result = vi.fit(vi.series(t, y))
+    assert result.method == "auto" and result.diagnostics["converged"]
+    order = result.diagnostics["model_order"]
+    final = [r for r in order if r["kept"]][-1]
+    assert (final["modes"], final["lines"], final["drift"], final["noise"]) == (3, 0, "none", "white")
+    params = result.summary()["parameters"]
+    for i, (f, zeta, _) in enumerate(THREE):
+        assert params[f"modes[{i}].frequency"]["median"] == pytest.approx(f, rel=0.01)
+        p = params[f"modes[{i}].damping_ratio"]
+        assert p["q05"] <= zeta <= p["q95"]
+    assert [c["kind"] for c in result.data["components"]].count("mode") == 3
+    json.dumps({"order": order, "components": result.data["components"]}, allow_nan=False)
+    assert all(result.diagnostics[f"mode_{i}_detected"] for i in range(3))
+
+
+def test_a_fixed_order_is_not_searched(tmp_path):
+    t, y = simulate(1500, modes=[(2.3, 0.03, 0.6)], sigma=0.5, seed=3)
+    table = {"modal": {"modes": 1, "lines": 0, "drift": False, "noise": "white"}}
+    result = vi.fit(vi.series(t, y), table, method="map")
+    assert result.diagnostics["model_order"] == []
+    assert result.data["model"]["modes"] == 1
+    mode = next(c for c in result.data["components"] if c["kind"] == "mode")
+    assert mode["frequency"] == pytest.approx(2.3, rel=0.02)
+    post = vi.posterior(vi.series(t, y), table)
+    assert post.model.name == "modal" and "modes[0].frequency" in post.space.names
+    summary, _ = vi.read_result(result.to_netcdf(tmp_path / "result.nc"))  # the result file holds them
+    assert summary["data"]["components"] == json.loads(json.dumps(result.data["components"]))
+    assert [d.what for d in vi.detect(vi.series(t, y), table)] == ["mode 0"]
+
+
+def test_sort_labels_renumbers_modes_by_frequency():
+    spec = ModalSpec(2, 0)
+    v = {"modes[0].frequency": 3.0, "modes[0].damping_ratio": 0.1, "modes[0].rms": 1.0}
+    v |= {"modes[1].frequency": 2.0, "modes[1].damping_ratio": 0.2, "modes[1].rms": 2.0}
+    out = sort_labels(v, spec)
+    assert (out["modes[0].frequency"], out["modes[0].damping_ratio"], out["modes[0].rms"]) == (2.0, 0.2, 2.0)

@@ -1,0 +1,433 @@
+"""The order of the modal model, chosen by the data: how many resonances and lines, and whether a
+drift and coloured noise are there (`choose_order`).
+
+Greedy forward selection by the Bayesian information criterion
+
+    BIC = -2 ln L_max + k ln n      (k free parameters, n observed samples).
+
+It starts from white noise plus a level. At each step it looks at the spectrum of the current
+model's standardized one-step residuals (innovations: white where the model describes the data;
+on irregular stamps the spectrum treats them as spaced by the median step, which only places the
+candidates) and proposes, at its strongest peak, a resonance (the peak of the smoothed residual
+spectrum) and a line (its highest bin), plus each nuisance term not yet in the model: a random-walk
+drift, AR(1) noise, 1/f noise. A nuisance term is first screened on a grid of starting values (one
+likelihood each) and dropped when no point of the grid gains. Each candidate is then fitted with
+only its new parameters, the level and the white noise free (the rest held at the current optimum:
+cheap, and a lower bound on its likelihood gain); the best `REFIT_TOP` of them (by that partial
+BIC, when within 0.5 ln n of lowering it) are refitted with every parameter free, by maximum
+likelihood inside the priors' support (the MAP under flat priors), in the Posterior's unconstrained
+space (L-BFGS-B with finite-difference gradients, each coordinate scaled by its curvature; a new
+mode from two damping starts). The candidate that lowers the BIC most is kept. When no addition
+lowers it, backward and exchange moves are tried the same way (each mode, line, drift or coloured
+noise removed; AR(1) and 1/f exchanged; a coloured noise and a random-walk drift exchanged): the
+greedy forward step may take a heavily damped low-frequency mode, or a slow AR(1), for what is
+AR(1) noise, or a drift, and the stepwise search undoes it. The search stops when no move lowers
+the BIC, or at the caps (6 modes, 6 lines). A component the user fixes (`modes`, `lines`, `drift`
+or `noise` in the `modal` table) is not searched.
+
+Why BIC: it is a consistent criterion for the order (the probability of choosing the true order
+goes to 1 as n grows, where AIC keeps a fixed chance of adding spurious components), and its
+penalty per added line or mode (3 parameters: frequency, amplitude or damping, phase or rms),
+1.5 ln n in log-likelihood, is 12.4 at n = 4000: the 5-sigma gain (12.5) the detection test
+(`vibinverse.detection`) asks of a line at a known frequency. A drift costs 0.5 ln n, AR(1) noise
+ln n, 1/f noise 0.5 ln n.
+
+A line within one resolution bin (1 / span) of a multiple m >= 2 of a lower line is recorded as
+that line's harmonic (`harmonic_of`, `harmonic` in the components): one source.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import warnings
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from scipy.optimize import minimize
+
+from vibinverse.errors import NumericalError
+from vibinverse.io.series import Series
+from vibinverse.models.modal import ModalModel, ModalSpec, mode_start, smooth, spectrum
+from vibinverse.priors import ParameterSpace
+
+logger = logging.getLogger(__name__)
+
+MAX_MODES = 6
+MAX_LINES = 6
+REFIT_TOP = 2  # candidates refitted with every parameter free, per step
+SEARCHED = ("modes", "lines", "drift", "noise")
+
+
+@dataclass
+class OrderFit:
+    """One fitted order: its model, the optimum, ln L there, k, and the BIC."""
+
+    spec: ModalSpec
+    model: ModalModel
+    values: dict[str, float]
+    log_likelihood: float
+    k: int
+    n: int
+
+    @property
+    def bic(self) -> float:
+        return -2.0 * self.log_likelihood + self.k * math.log(self.n)
+
+
+@dataclass
+class OrderResult:
+    """The chosen order: its fit, the criterion table (each step: what was tried, its BIC, kept or
+    not) and the fitted components; `table()` is the `modal` table of the chosen order, with the
+    optimum as its starting point."""
+
+    fit: OrderFit
+    criterion: list[dict[str, Any]] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def spec(self) -> ModalSpec:
+        return self.fit.spec
+
+    @property
+    def values(self) -> dict[str, float]:
+        return self.fit.values
+
+    @property
+    def components(self) -> list[dict[str, Any]]:
+        return self.fit.model.components(self.fit.values)
+
+    def table(self) -> dict[str, Any]:
+        return {"modal": {**self.fit.spec.table(), "start": dict(self.fit.values)}}
+
+
+def sort_labels(values: dict[str, float], spec: ModalSpec) -> dict[str, float]:
+    """The same model with its modes, and its lines, renumbered by increasing frequency (the
+    labelling `ModalModel.log_likelihood` accepts)."""
+    out = dict(values)
+    for kind, count, fields in (
+        ("modes", spec.modes, ("frequency", "damping_ratio", "rms")),
+        ("lines", spec.lines, ("frequency", "amplitude", "phase")),
+    ):
+        if count < 2:
+            continue
+        items = [tuple(values[f"{kind}[{i}].{f}"] for f in fields) for i in range(count)]
+        for i, item in enumerate(sorted(items)):
+            for f, v in zip(fields, item):
+                out[f"{kind}[{i}].{f}"] = v
+    return out
+
+
+def fit_order(
+    series: Series,
+    spec: ModalSpec,
+    starts: list[dict[str, float]],
+    free: list[str] | None = None,
+    maxiter: int = 300,
+    ftol: float = 1e-10,
+) -> OrderFit:
+    """Maximum likelihood of `spec` inside its default priors' support, from each start (the
+    parameters not in `free` held at the start's values), in the unconstrained space of the priors
+    (logit; L-BFGS-B with finite-difference gradients); the modes and lines sorted by frequency."""
+    model = ModalModel({"modal": spec.table()}, series)
+    space = ParameterSpace(model.default_priors())
+    names = space.names
+    free = [n for n in names if free is None or n in free]
+    pos = [names.index(n) for n in free]
+    best: tuple[float, dict[str, float]] | None = None
+    for start in starts:
+        start = {n: p.inside(start.get(n, p.centre())) for n, p in zip(names, space.priors)}
+        z0 = space.to_z(start)
+
+        def neg(zf: np.ndarray, z0=z0) -> float:
+            z = z0.copy()
+            z[pos] = zf
+            ll = model.log_likelihood(sort_labels(space.from_z(z), spec))
+            return -ll if math.isfinite(ll) else 1e300
+
+        zf0 = z0[pos]
+        scale = _preconditioner(neg, zf0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            res = minimize(
+                lambda w, zf0=zf0, scale=scale, neg=neg: neg(zf0 + scale * w),
+                np.zeros(len(pos)),
+                method="L-BFGS-B",
+                bounds=list(zip((-30.0 - zf0) / scale, (30.0 - zf0) / scale)),
+                options={"maxiter": maxiter, "ftol": ftol, "gtol": 1e-6, "eps": 1e-6},
+            )
+        z = z0.copy()
+        z[pos] = zf0 + scale * res.x
+        ll = -float(res.fun)
+        if best is None or ll > best[0]:
+            best = (ll, sort_labels(space.from_z(z), spec))
+    if best is None or not math.isfinite(best[0]) or best[0] <= -1e299:
+        raise NumericalError(f"model order: no finite likelihood for {spec}")
+    return OrderFit(spec, model, best[1], best[0], len(names), model.n_obs)
+
+
+def _preconditioner(neg: Any, z: np.ndarray, h: float = 1e-3) -> np.ndarray:
+    """Per-coordinate scales 1 / sqrt(curvature) of `neg` at z (central differences; clipped to
+    [1e-6, 1]): the optimizer works in units of each parameter's width, so that a sharp frequency
+    and a broad noise level take steps of the same size (fewer iterations)."""
+    f0 = neg(z)
+    out = np.ones(z.size)
+    for i in range(z.size):
+        e = np.zeros(z.size)
+        e[i] = h
+        c = (neg(z + e) - 2.0 * f0 + neg(z - e)) / (h * h)
+        if math.isfinite(c) and c > 0:
+            out[i] = 1.0 / math.sqrt(c)
+    return np.clip(out, 1e-6, 1.0)
+
+
+@dataclass
+class Candidate:
+    what: str
+    spec: ModalSpec
+    starts: list[dict[str, float]]
+    new: list[str]
+
+
+def innovations(fit: OrderFit) -> np.ndarray:
+    """The one-step prediction errors in intensity units (NaN at gaps): standardized residual x
+    sqrt(innovation variance), the variance recovered from the pointwise log density."""
+    e = fit.model.residuals(fit.values)
+    lk = fit.model.pointwise_log_likelihood(fit.values)
+    s = np.exp(-2.0 * lk - math.log(2.0 * math.pi) - e * e)
+    return e * np.sqrt(s)
+
+
+def candidates(fit: OrderFit, series: Series, search: dict[str, bool], caps: tuple[int, int]) -> list[Candidate]:
+    """What to try next (module docstring): a mode and a line at the residual spectrum's strongest
+    peak, and each nuisance term the model lacks."""
+    spec, values = fit.spec, fit.values
+    model = fit.model
+    dt = float(model.steps[0]) if model.steps.size == 1 else series.dt
+    span = max(model.span, dt)
+    lo, nyq = 3.0 / span, 0.5 / dt
+    e = model.residuals(values)
+    freqs, power = spectrum(e, dt)
+    band = (freqs >= lo) & (freqs < 0.999 * nyq)
+    out: list[Candidate] = []
+    v = innovations(fit)
+    vf, vp = spectrum(v, dt)
+    floor = float(np.median(vp[band])) / math.log(2.0)
+    sigma = values["noise.sigma"]
+    if search["modes"] and spec.modes < caps[0] and band.any():
+        sm = smooth(power, 7)
+        i = int(np.flatnonzero(band)[np.argmax(sm[band])])
+        f = float(freqs[i])
+        zeta, rms = mode_start(vf, vp, f, model.n_obs, floor)
+        k = spec.modes
+        new = [f"modes[{k}].frequency", f"modes[{k}].damping_ratio", f"modes[{k}].rms"]
+        starts = [{**values, new[0]: f, new[1]: z, new[2]: rms} for z in sorted({zeta, 0.01, 0.05})[:2]]
+        out.append(Candidate(f"mode at {f:.4g} Hz", replace(spec, modes=k + 1), starts, new))
+    if search["lines"] and spec.lines < caps[1] and band.any():
+        from vibinverse.spectrum import sinusoid
+
+        i = int(np.flatnonzero(band)[np.argmax(power[band])])
+        df = freqs[1] - freqs[0]
+        y0 = model.y - model.mean(values)
+        fine = np.linspace(freqs[i] - df, freqs[i] + df, 41)
+        f = float(max(fine, key=lambda ff: sinusoid(model.t, y0, ff)[0]))
+        a, ph, _ = sinusoid(model.t, y0, f)
+        k = spec.lines
+        new = [f"lines[{k}].frequency", f"lines[{k}].amplitude", f"lines[{k}].phase"]
+        out.append(
+            Candidate(
+                f"line at {f:.6g} Hz", replace(spec, lines=k + 1), [{**values, new[0]: f, new[1]: a, new[2]: ph}], new
+            )
+        )
+    sd = float(np.nanstd(v))
+    if search["drift"] and spec.drift == "none":
+        grid = [{**values, "drift.rate": c * sd / math.sqrt(span)} for c in (0.03, 0.1, 0.3, 1.0, 3.0)]
+        out.append(Candidate("drift (random walk)", replace(spec, drift="walk"), grid, ["drift.rate"]))
+    if search["noise"] and spec.noise == "white":
+        grid = [
+            {**values, "ar.rms": c * sigma, "ar.time": tau * dt, "noise.sigma": sigma * math.sqrt(max(1 - c * c, 0.05))}
+            for tau in (2.0, 10.0, 50.0)
+            for c in (0.3, 0.9)
+        ]
+        out.append(Candidate("AR(1) noise", replace(spec, noise="ar1"), grid, ["ar.rms", "ar.time"]))
+        grid = [
+            {**values, "flicker.rms": c * sigma, "noise.sigma": sigma * math.sqrt(max(1 - c * c, 0.05))}
+            for c in (0.1, 0.3, 0.9)
+        ]
+        out.append(Candidate("1/f noise", replace(spec, noise="1/f"), grid, ["flicker.rms"]))
+    return out
+
+
+def screen(series: Series, current: OrderFit, c: Candidate) -> tuple[Candidate, float]:
+    """A nuisance candidate's best starting point on its grid of starts (no optimization: one
+    likelihood each), and the gain in ln L there over the current fit. A term that gains nothing
+    anywhere on a grid spanning its plausible range is not worth an optimization."""
+    model = ModalModel({"modal": c.spec.table()}, series)
+    scored = [(model.log_likelihood(sort_labels(st, c.spec)), st) for st in c.starts]
+    ll, st = max(scored, key=lambda s: s[0] if math.isfinite(s[0]) else -math.inf)
+    return replace(c, starts=[st]), ll - current.log_likelihood
+
+
+def _renumber(values: dict[str, float], kind: str, drop: int, count: int) -> dict[str, float]:
+    """`values` without component `drop` of `kind` ("modes" or "lines"), the later ones shifted down."""
+    out = {n: v for n, v in values.items() if not n.startswith(f"{kind}[")}
+    for i, j in enumerate(k for k in range(count) if k != drop):
+        for n, v in values.items():
+            if n.startswith(f"{kind}[{j}]."):
+                out[f"{kind}[{i}]." + n.split(".", 1)[1]] = v
+    return out
+
+
+def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[Candidate]:
+    """The backward and exchange moves from the current order: each mode, line, drift or coloured
+    noise removed, the coloured noise exchanged for the other kind, and a coloured noise exchanged
+    for a random-walk drift (and back): a slow AR(1) and a random walk, or a heavily damped
+    low-frequency mode and AR(1) noise, describe much the same spectrum, and the greedy forward
+    step may have taken the wrong one first."""
+    spec, values = fit.spec, fit.values
+    sigma = values["noise.sigma"]
+    span = max(fit.model.span, series.dt)
+    out: list[Candidate] = []
+    nuisance = ["drift.rate", "ar.rms", "ar.time", "flicker.rms"]
+
+    def move(what: str, new_spec: ModalSpec, starts: list[dict[str, float]]) -> Candidate:
+        names = set(new_spec.names())
+        return Candidate(what, new_spec, starts, [n for n in nuisance if n in names])
+
+    if search["modes"]:
+        for i in range(spec.modes):
+            f = values[f"modes[{i}].frequency"]
+            start = _renumber(values, "modes", i, spec.modes)
+            out.append(move(f"remove the mode at {f:.4g} Hz", replace(spec, modes=spec.modes - 1), [start]))
+    if search["lines"]:
+        for j in range(spec.lines):
+            f = values[f"lines[{j}].frequency"]
+            start = _renumber(values, "lines", j, spec.lines)
+            out.append(move(f"remove the line at {f:.6g} Hz", replace(spec, lines=spec.lines - 1), [start]))
+    if search["drift"] and spec.drift != "none":
+        out.append(move("remove the drift", replace(spec, drift="none"), [dict(values)]))
+    if search["noise"] and spec.noise != "white":
+        out.append(move(f"remove the {spec.noise} noise", replace(spec, noise="white"), [dict(values)]))
+        other = "1/f" if spec.noise == "ar1" else "ar1"
+        starts = (
+            [{**values, "flicker.rms": values.get("ar.rms", sigma)}]
+            if other == "1/f"
+            else [
+                {**values, "ar.rms": values.get("flicker.rms", sigma), "ar.time": tau * series.dt}
+                for tau in (3.0, 30.0)
+            ]
+        )
+        out.append(move(f"{spec.noise} noise exchanged for {other} noise", replace(spec, noise=other), starts))
+    if search["noise"] and search["drift"]:
+        rms = values.get("ar.rms", values.get("flicker.rms", sigma))
+        if spec.noise != "white" and spec.drift == "none":
+            start = {**values, "drift.rate": rms / math.sqrt(span)}
+            out.append(
+                move(
+                    f"{spec.noise} noise exchanged for a random-walk drift",
+                    replace(spec, noise="white", drift="walk"),
+                    [start],
+                )
+            )
+        if spec.noise == "white" and spec.drift == "walk":
+            starts = [{**values, "ar.rms": values["drift.rate"] * math.sqrt(span), "ar.time": span / 10.0}]
+            out.append(move("the drift exchanged for AR(1) noise", replace(spec, noise="ar1", drift="none"), starts))
+    return out
+
+
+def choose_order(
+    series: Series,
+    table: dict[str, Any] | None = None,
+    *,
+    max_modes: int = MAX_MODES,
+    max_lines: int = MAX_LINES,
+    max_steps: int = 20,
+) -> OrderResult:
+    """Choose the modal model's order for `series` by stepwise BIC selection (module docstring).
+    `table`: a `{"modal": {...}}` table whose `modes`, `lines`, `drift`, `noise` are fixed (not
+    searched); None searches all. Returns the chosen fit and the criterion table."""
+    t0 = time.perf_counter()
+    fixed = dict((table or {}).get("modal") or {})
+    spec = ModalSpec.from_table({"modal": {k: fixed[k] for k in SEARCHED if k in fixed}})
+    search = {k: k not in fixed for k in SEARCHED}
+    model0 = ModalModel({"modal": spec.table()}, series)
+    current = fit_order(series, spec, model0.guesses(model0.default_priors()))
+    rows: list[dict[str, Any]] = [_row(0, "start: " + _describe(spec), current, None, "full", True)]
+    logger.info("model order: %s, BIC %.1f", _describe(spec), current.bic)
+    for step in range(1, max_steps + 1):
+        cands = candidates(current, series, search, (max_modes, max_lines))
+        best = _best_move(series, current, cands, rows, step)
+        if best is None:  # nothing to add: remove or exchange a component
+            best = _best_move(series, current, neighbours(current, series, search), rows, step)
+        if best is None:
+            break
+        current = best
+    return OrderResult(current, rows, time.perf_counter() - t0)
+
+
+def _best_move(
+    series: Series, current: OrderFit, cands: list[Candidate], rows: list[dict[str, Any]], step: int
+) -> OrderFit | None:
+    """The best of the candidate orders (partial fits, then full refits of the best REFIT_TOP),
+    when it lowers the BIC; every candidate recorded in `rows`."""
+    if not cands:
+        return None
+    partial = []
+    for c in cands:
+        if len(c.starts) > 2:  # a nuisance term's grid: screened first
+            c, gain = screen(series, current, c)
+            if not gain > 0:
+                f = OrderFit(
+                    c.spec, current.model, c.starts[0], current.log_likelihood + gain, current.k + len(c.new), current.n
+                )
+                rows.append(_row(step, c.what, f, current.bic, "screened out (no gain on its grid of starts)", False))
+                continue
+        keep = [*c.new, "level", "noise.sigma"]
+        pf = fit_order(series, c.spec, c.starts, free=keep, maxiter=60, ftol=1e-9)
+        partial.append((c, pf))
+    partial.sort(key=lambda cp: cp[1].bic)
+    slack = 0.5 * math.log(current.n)  # a partial fit this close to a lower BIC may get there refitted
+    refits = []
+    for c, pf in partial[:REFIT_TOP]:
+        if pf.bic < current.bic + slack:
+            refits.append((c, fit_order(series, c.spec, [pf.values])))
+    best = min(refits, key=lambda cf: cf[1].bic, default=None)
+    kept = best is not None and best[1].bic < current.bic
+    refitted = {id(c): f for c, f in refits}
+    for c, pf in partial:
+        f = refitted.get(id(c), pf)
+        rows.append(
+            _row(step, c.what, f, current.bic, "full" if id(c) in refitted else "partial", kept and c is best[0])
+        )
+    if not kept:
+        return None
+    logger.info("model order: + %s, BIC %.1f -> %.1f", best[0].what, current.bic, best[1].bic)
+    return best[1]
+
+
+def _describe(spec: ModalSpec) -> str:
+    parts = [f"{spec.modes} modes", f"{spec.lines} lines"]
+    if spec.drift != "none":
+        parts.append(f"{spec.drift} drift")
+    parts.append(f"{spec.noise} noise")
+    return ", ".join(parts)
+
+
+def _row(step: int, what: str, fit: OrderFit, before: float | None, refit: str, kept: bool) -> dict[str, Any]:
+    return {
+        "step": step,
+        "tried": what,
+        "order": _describe(fit.spec),
+        "modes": fit.spec.modes,
+        "lines": fit.spec.lines,
+        "drift": fit.spec.drift,
+        "noise": fit.spec.noise,
+        "k": fit.k,
+        "log_likelihood": float(fit.log_likelihood),
+        "bic": float(fit.bic),
+        "delta_bic": None if before is None else float(fit.bic - before),
+        "fit": refit,
+        "kept": bool(kept),
+    }

@@ -1,0 +1,987 @@
+"""A scene-less generic modal model: a measured series as stochastic resonances, deterministic lines
+and nuisance terms, all in one Kalman filter (`ModalModel`, registered as "modal").
+
+    y(t) = level + sum_i q_i(t) + sum_j A_j cos(2 pi f_j t + phase_j) + d(t) + c(t) + e(t)
+
+- q_i: K resonances (`modes[i].frequency` f in Hz, `modes[i].damping_ratio` zeta,
+  `modes[i].rms` the stationary RMS in the intensity's units): q'' + 2 zeta w q' + w^2 q = xi(t),
+  w = 2 pi f, xi continuous white noise of intensity kappa = 4 zeta w^3 rms^2. Two states (q, q').
+- lines: L deterministic sinusoids (`lines[j].frequency`, `.amplitude`, `.phase`): the mean.
+- d: drift (`drift.rate`, the RMS change per sqrt(second)): a random walk started at 0 (so that
+  `level` is the series' level at the first sample), or an integrated random walk (drift
+  "integrated": a slope state driven by white noise of intensity rate^2, level and slope started
+  at 0; `drift.rate` is then in intensity per s^1.5).
+- c: coloured noise. "ar1": one Ornstein-Uhlenbeck state (`ar.rms`, its stationary RMS, and
+  `ar.time`, the correlation time in s; sampled, an AR(1) with phi = exp(-dt / time)). "1/f": three
+  Ornstein-Uhlenbeck states with correlation times span / 2 pi x (1, 1/10, 1/100) (corners at 1,
+  10 and 100 cycles per record), each of variance `flicker.rms`^2 / 3: a spectrum ~ 1/f between
+  the corners.
+- e: white sensor noise (`noise.sigma`).
+
+Every random block is discretized exactly over each time step (`_fill_tables`, compiled): the
+oscillator by the closed form of the Van Loan matrix exponential (Phi = e^{A dt},
+Q = int_0^dt e^{As} G G^T e^{A^T s} ds kappa; a Taylor series of the impulse response for Q11 when
+the step is short against the oscillator's rate, where the closed form cancels), the walks and the
+Ornstein-Uhlenbeck states by their elementary forms. A uniform grid has one step; irregular stamps
+(jitter, dropped frames) a table of the distinct steps (`vibinverse.kalman.unique_steps`, rounded to
+1e-9 of the median step) with an index per sample: the same exact discretization per step. NaN
+samples are gaps. The state transition is block diagonal (2 x 2 and 1 x 1 blocks), and the filter
+(`_block_filter`, compiled, O(T)) uses that: the covariance is propagated block pair by block pair
+in closed form (`_predict_cov`, O(n^2) a step instead of O(n^3) for n states), and once the gain
+and the innovation variance have reached the Riccati recursion's fixed point (their change between
+two observed samples of the same step, extrapolated geometrically, below 1e-14 of their scale) the
+gain is held until a gap or another step: O(n) a step from there, the same numbers to rounding
+(tested against the plain numpy filter to 1e-10). White noise alone has one dummy state nobody sees.
+Lightly damped modes and slow drifts converge late (a random walk of step variance q in white noise
+of variance r over ~sqrt(r / q) steps), so the hold saves most on long records of damped modes.
+
+Label switching: the modes (and the lines) are exchangeable, so `log_likelihood` is -inf unless
+the modes' frequencies are strictly increasing, and the lines' too (a sorted-frequency constraint;
+the priors of all modes are the same window, lo..Nyquist). Mode 0 is always the lowest.
+
+The table: `{"modal": {"modes": 3, "lines": 0, "drift": True, "noise": "ar1"}}`; `drift` is False
+(none), True or "walk", or "integrated"; `noise` is "white", "ar1" or "1/f". Optional
+`"start": {name: value}` is the first starting point (the order search writes its optimum there),
+and `"values": {name: value}` the values of parameters that are not free (default: the start,
+else the first spectral guess).
+
+The Fisher information (`fisher`) is numerical: the observed information, central finite
+differences of the exact log-likelihood with steps of a tenth of each parameter's width.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from vibinverse.errors import SceneError
+from vibinverse.io.series import Series
+from vibinverse.kalman import njit, unique_steps
+from vibinverse.models.base import LineTest, SignalModel, intensity_units, parameter_units, register_model
+from vibinverse.priors import Prior
+
+NOISE_KINDS = ("white", "ar1", "1/f")
+DRIFT_KINDS = ("none", "walk", "integrated")
+FLICKER_DECADES = (1.0, 0.1, 0.01)  # correlation times, x span / (2 pi)
+FREEZE_TOL = 1e-14  # the filter holds its gain once the covariance has converged to this (relative)
+
+_OSC, _WALK, _IWALK, _OU = 0, 1, 2, 3
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+# ------------------------------------------------------------------ the model's order
+
+
+@dataclass(frozen=True)
+class ModalSpec:
+    """The model's order: K modes, L lines, the drift ("none", "walk", "integrated") and the
+    coloured noise ("white", "ar1", "1/f")."""
+
+    modes: int = 0
+    lines: int = 0
+    drift: str = "none"
+    noise: str = "white"
+
+    @classmethod
+    def from_table(cls, table: dict[str, Any]) -> ModalSpec:
+        """The order a table's `modal` sub-table gives (absent keys: none of that component)."""
+        m = table.get("modal")
+        if m is None:
+            m = {}
+        if not isinstance(m, dict):
+            raise SceneError("modal: must be a table, e.g. {modes = 2, lines = 0, drift = true, noise = 'ar1'}")
+        unknown = set(m) - {"modes", "lines", "drift", "noise", "values", "start"}
+        if unknown:
+            raise SceneError(
+                f"modal.{sorted(unknown)[0]}: unknown key; allowed: modes, lines, drift, noise, values, start"
+            )
+        out = {}
+        for key in ("modes", "lines"):
+            v = m.get(key, 0)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= int(v) <= 20:
+                raise SceneError(f"modal.{key}: {v!r}; allowed: an integer in [0, 20]")
+            out[key] = int(v)
+        drift = m.get("drift", False)
+        if drift is True:
+            drift = "walk"
+        elif drift is False or drift is None:
+            drift = "none"
+        if drift not in DRIFT_KINDS:
+            raise SceneError(f"modal.drift: {m.get('drift')!r}; allowed: false, true, 'walk', 'integrated'")
+        noise = m.get("noise", "white")
+        if noise not in NOISE_KINDS:
+            raise SceneError(f"modal.noise: {noise!r}; allowed: {', '.join(repr(k) for k in NOISE_KINDS)}")
+        return cls(out["modes"], out["lines"], drift, noise)
+
+    def table(self) -> dict[str, Any]:
+        """The `modal` sub-table of this order."""
+        return {
+            "modes": self.modes,
+            "lines": self.lines,
+            "drift": self.drift != "none" and self.drift,
+            "noise": self.noise,
+        }
+
+    def names(self) -> list[str]:
+        """Every parameter of this order, in a fixed order."""
+        out = ["level"]
+        for i in range(self.modes):
+            out += [f"modes[{i}].frequency", f"modes[{i}].damping_ratio", f"modes[{i}].rms"]
+        for j in range(self.lines):
+            out += [f"lines[{j}].frequency", f"lines[{j}].amplitude", f"lines[{j}].phase"]
+        if self.drift != "none":
+            out.append("drift.rate")
+        if self.noise == "ar1":
+            out += ["ar.rms", "ar.time"]
+        elif self.noise == "1/f":
+            out.append("flicker.rms")
+        out.append("noise.sigma")
+        return out
+
+    def n_states(self) -> int:
+        return (
+            2 * self.modes
+            + {"none": 0, "walk": 1, "integrated": 2}[self.drift]
+            + {"white": 0, "ar1": 1, "1/f": 3}[self.noise]
+        )
+
+
+# ------------------------------------------------------------------ compiled kernels
+
+
+@njit(cache=True, fastmath=False)
+def _oscillator(w, a, kappa, t, phi, q, o):  # pragma: no cover - compiled; tested against expm
+    """The exact (Phi, Q) of x = (q, q'), q'' + 2 a q' + w^2 q = xi (intensity kappa), over a step
+    t, written into the 2 x 2 block at (o, o). With uS = e^{-at} sin(bt) / b, uC = e^{-at} cos(bt),
+    b^2 = w^2 - a^2 (sinh / cosh when overdamped, t when critical):
+
+        Phi = [[uC + a uS, uS], [-w^2 uS, uC - a uS]]
+        Q11 = kappa / (4 w^2) ((1 - e^{-2at}) / a - 2 uS uC - 2 a uS^2)
+        Q12 = kappa uS^2 / 2
+        Q22 = kappa / 4 ((1 - e^{-2at}) / a + 2 uS uC - 2 a uS^2)
+
+    Q11 cancels to ~eps / (rate t)^2 at short steps: there it is kappa int_0^t g(s)^2 ds from the
+    Taylor series of the impulse response g (g'' = -2a g' - w^2 g, g(0) = 0, g'(0) = 1)."""
+    b2 = w * w - a * a
+    if b2 > 0.0:
+        bb = math.sqrt(b2)
+        ea = math.exp(-a * t)
+        us = ea * math.sin(bb * t) / bb
+        uc = ea * math.cos(bb * t)
+        rate = w
+    elif b2 < 0.0:
+        beta = math.sqrt(-b2)
+        e1 = math.exp(-(a - beta) * t)
+        uc = 0.5 * (e1 + math.exp(-(a + beta) * t))
+        us = e1 * (-math.expm1(-2.0 * beta * t)) / (2.0 * beta)
+        rate = a + beta
+    else:
+        ea = math.exp(-a * t)
+        us = ea * t
+        uc = ea
+        rate = a
+    em = -math.expm1(-2.0 * a * t) / a if a > 0.0 else 2.0 * t
+    phi[o, o] = uc + a * us
+    phi[o, o + 1] = us
+    phi[o + 1, o] = -w * w * us
+    phi[o + 1, o + 1] = uc - a * us
+    if rate * t < 0.5:
+        nt = 18
+        c = np.zeros(nt + 1)  # c[k] = g^(k)(0) t^k / k!
+        c[1] = t
+        for k in range(nt - 1):  # (k+2)(k+1) c_{k+2} = -2a (k+1) c_{k+1} t - w^2 c_k t^2
+            c[k + 2] = (-2.0 * a * (k + 1) * c[k + 1] * t - w * w * c[k] * t * t) / ((k + 2) * (k + 1))
+        acc = 0.0
+        for n in range(2 * nt, 1, -1):  # int_0^t g^2 = t sum_n e_n / (n + 1), e_n = sum_j c_j c_{n-j}
+            e = 0.0
+            for j in range(max(1, n - nt), min(n - 1, nt) + 1):
+                e += c[j] * c[n - j]
+            acc += e / (n + 1)
+        q11 = kappa * t * acc
+    else:
+        q11 = kappa / (4.0 * w * w) * (em - 2.0 * us * uc - 2.0 * a * us * us)
+    q12 = 0.5 * kappa * us * us
+    q[o, o] = q11
+    q[o, o + 1] = q12
+    q[o + 1, o] = q12
+    q[o + 1, o + 1] = 0.25 * kappa * (em + 2.0 * us * uc - 2.0 * a * us * us)
+
+
+@njit(cache=True, fastmath=False)
+def _fill_tables(kinds, pars, offsets, steps, phis, qs, p0):  # pragma: no cover - compiled
+    """(Phi, Q) of every block for every step, and the initial covariance P0. Block b starts at
+    state offsets[b]; kinds: oscillator (w, a = zeta w, rms), random walk (rate^2), integrated
+    random walk (rate^2), Ornstein-Uhlenbeck (time, variance)."""
+    phis[:] = 0.0
+    qs[:] = 0.0
+    p0[:] = 0.0
+    for b in range(kinds.shape[0]):
+        o = offsets[b]
+        kind = kinds[b]
+        if kind == _OSC:
+            w, a, rms = pars[b, 0], pars[b, 1], pars[b, 2]
+            kappa = 4.0 * a * w * w * rms * rms
+            for u in range(steps.shape[0]):
+                _oscillator(w, a, kappa, steps[u], phis[u], qs[u], o)
+            p0[o, o] = rms * rms
+            p0[o + 1, o + 1] = w * w * rms * rms
+        elif kind == _WALK:
+            for u in range(steps.shape[0]):
+                phis[u, o, o] = 1.0
+                qs[u, o, o] = pars[b, 0] * steps[u]
+        elif kind == _IWALK:
+            for u in range(steps.shape[0]):
+                dt = steps[u]
+                phis[u, o, o] = 1.0
+                phis[u, o, o + 1] = dt
+                phis[u, o + 1, o + 1] = 1.0
+                qs[u, o, o] = pars[b, 0] * dt * dt * dt / 3.0
+                qs[u, o, o + 1] = pars[b, 0] * dt * dt / 2.0
+                qs[u, o + 1, o] = pars[b, 0] * dt * dt / 2.0
+                qs[u, o + 1, o + 1] = pars[b, 0] * dt
+        else:
+            tau, var = pars[b, 0], pars[b, 1]
+            for u in range(steps.shape[0]):
+                phis[u, o, o] = math.exp(-steps[u] / tau)
+                qs[u, o, o] = -var * math.expm1(-2.0 * steps[u] / tau)
+            p0[o, o] = var
+
+
+@njit(cache=True, fastmath=False)
+def _predict_cov(p, phi, q, bs, bz):  # pragma: no cover - compiled
+    """P <- Phi P Phi^T + Q in place, Phi and Q block diagonal (block b: states bs[b] .. bs[b] +
+    bz[b] - 1, bz 1 or 2), block pair by block pair in closed form (the upper triangle, mirrored)."""
+    nb = bs.shape[0]
+    for a in range(nb):
+        oa = bs[a]
+        a00 = phi[oa, oa]
+        if bz[a] == 2:
+            a01, a10, a11 = phi[oa, oa + 1], phi[oa + 1, oa], phi[oa + 1, oa + 1]
+        else:
+            a01 = a10 = a11 = 0.0
+        for b in range(a, nb):
+            ob = bs[b]
+            b00 = phi[ob, ob]
+            if bz[a] == 2 and bz[b] == 2:
+                b01, b10, b11 = phi[ob, ob + 1], phi[ob + 1, ob], phi[ob + 1, ob + 1]
+                p00, p01, p10, p11 = p[oa, ob], p[oa, ob + 1], p[oa + 1, ob], p[oa + 1, ob + 1]
+                t00 = a00 * p00 + a01 * p10
+                t01 = a00 * p01 + a01 * p11
+                t10 = a10 * p00 + a11 * p10
+                t11 = a10 * p01 + a11 * p11
+                m00 = t00 * b00 + t01 * b01
+                m01 = t00 * b10 + t01 * b11
+                m10 = t10 * b00 + t11 * b01
+                m11 = t10 * b10 + t11 * b11
+                if a == b:
+                    m00 += q[oa, oa]
+                    m01 += q[oa, oa + 1]
+                    m11 += q[oa + 1, oa + 1]
+                    m10 = m01
+                p[oa, ob] = m00
+                p[oa, ob + 1] = m01
+                p[oa + 1, ob] = m10
+                p[oa + 1, ob + 1] = m11
+                p[ob, oa] = m00
+                p[ob + 1, oa] = m01
+                p[ob, oa + 1] = m10
+                p[ob + 1, oa + 1] = m11
+            elif bz[a] == 2:  # b is 1 x 1
+                m0 = (a00 * p[oa, ob] + a01 * p[oa + 1, ob]) * b00
+                m1 = (a10 * p[oa, ob] + a11 * p[oa + 1, ob]) * b00
+                p[oa, ob] = m0
+                p[oa + 1, ob] = m1
+                p[ob, oa] = m0
+                p[ob, oa + 1] = m1
+            elif bz[b] == 2:  # a is 1 x 1
+                b01, b10, b11 = phi[ob, ob + 1], phi[ob + 1, ob], phi[ob + 1, ob + 1]
+                m0 = a00 * (p[oa, ob] * b00 + p[oa, ob + 1] * b01)
+                m1 = a00 * (p[oa, ob] * b10 + p[oa, ob + 1] * b11)
+                p[oa, ob] = m0
+                p[oa, ob + 1] = m1
+                p[ob, oa] = m0
+                p[ob + 1, oa] = m1
+            else:
+                m = a00 * p[oa, ob] * b00
+                if a == b:
+                    m += q[oa, oa]
+                p[oa, ob] = m
+                p[ob, oa] = m
+
+
+@njit(cache=True, fastmath=False)
+def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls):  # pragma: no cover - compiled
+    """log p(y) of x_k = Phi_k x_{k-1} + w_k, y_k = h . x_k + v_k with block-diagonal Phi_k
+    (= phis[idx[k]]; state i's block is lo[i]..hi[i]) and Q_k, x_0 ~ N(0, P0); NaN gaps skipped.
+    Writes the standardized innovations to `white` and each sample's log density to `lls` when
+    they are not empty (NaN at gaps). With `freeze`, the gain and the innovation variance are held
+    once they stop changing between two observed samples of the same step (their change,
+    extrapolated geometrically, below FREEZE_TOL of their scale: the Riccati recursion's fixed point
+    to rounding), until a gap or another step (module docstring)."""
+    n = phis.shape[1]
+    nb = 0
+    for i in range(n):
+        nb += lo[i] == i
+    bs = np.zeros(nb, dtype=np.int64)
+    bz = np.zeros(nb, dtype=np.int64)
+    b = 0
+    for i in range(n):
+        if lo[i] == i:
+            bs[b] = i
+            bz[b] = hi[i] - i
+            b += 1
+    nobs = 0
+    for i in range(n):
+        nobs += h[i] != 0.0
+    seen = np.zeros(nobs, dtype=np.int64)
+    b = 0
+    for i in range(n):
+        if h[i] != 0.0:
+            seen[b] = i
+            b += 1
+    x = np.zeros(n)
+    xp = np.zeros(n)
+    p = p0.copy()
+    pf = np.zeros((n, n))
+    ph = np.zeros(n)
+    gain = np.zeros(n)
+    prev_gain = np.zeros(n)
+    prev_s = 0.0
+    have_prev = False
+    prev_u = -1
+    last_delta = np.inf
+    frozen = False
+    fu = -1
+    sf = 1.0
+    ll = 0.0
+    u = 0
+    for k in range(y.shape[0]):
+        yk = y[k]
+        observed = yk == yk
+        if k > 0:
+            u = idx[k]
+            for i in range(n):
+                acc = 0.0
+                for m in range(lo[i], hi[i]):
+                    acc += phis[u, i, m] * x[m]
+                xp[i] = acc
+            for i in range(n):
+                x[i] = xp[i]
+            if frozen and (u != fu or not observed):
+                frozen = False
+                for i in range(n):
+                    for j in range(n):
+                        p[i, j] = pf[i, j]
+                have_prev = False
+                last_delta = np.inf
+            if frozen:
+                v = yk
+                for i in range(n):
+                    v -= h[i] * x[i]
+                for i in range(n):
+                    x[i] += gain[i] * v
+                lk = -0.5 * (math.log(sf) + _LOG_2PI + v * v / sf)
+                ll += lk
+                if lls.shape[0]:
+                    lls[k] = lk
+                if white.shape[0]:
+                    white[k] = v / math.sqrt(sf)
+                continue
+            _predict_cov(p, phis[u], qs[u], bs, bz)
+        if not observed:
+            have_prev = False
+            if white.shape[0]:
+                white[k] = np.nan
+            if lls.shape[0]:
+                lls[k] = np.nan
+            continue
+        s = r
+        v = yk
+        for i in range(n):
+            acc = 0.0
+            for jj in range(nobs):
+                acc += p[i, seen[jj]] * h[seen[jj]]
+            ph[i] = acc
+        for jj in range(nobs):
+            s += h[seen[jj]] * ph[seen[jj]]
+            v -= h[seen[jj]] * x[seen[jj]]
+        if not s > 0.0:
+            if lls.shape[0]:
+                lls[k:] = -np.inf
+            return -np.inf
+        for i in range(n):
+            x[i] += ph[i] * v / s
+        for i in range(n):
+            g = ph[i] / s
+            for j in range(i, n):
+                d = p[i, j] - g * ph[j]
+                p[i, j] = d
+                p[j, i] = d
+        lk = -0.5 * (math.log(s) + _LOG_2PI + v * v / s)
+        ll += lk
+        if lls.shape[0]:
+            lls[k] = lk
+        if white.shape[0]:
+            white[k] = v / math.sqrt(s)
+        if freeze:
+            if have_prev and u == prev_u:
+                scale = 0.0
+                for i in range(n):
+                    scale = max(scale, abs(ph[i] / s))
+                delta = abs(s - prev_s) / s
+                for i in range(n):
+                    d = abs(ph[i] / s - prev_gain[i])
+                    if d > 0.0:
+                        delta = max(delta, d / scale)
+                if delta == 0.0 or (delta < last_delta < np.inf and delta * delta <= FREEZE_TOL * (last_delta - delta)):
+                    frozen = True
+                    fu = u
+                    sf = s
+                    for i in range(n):
+                        gain[i] = ph[i] / s
+                        for j in range(n):
+                            pf[i, j] = p[i, j]
+                last_delta = delta
+            for i in range(n):
+                prev_gain[i] = ph[i] / s
+            prev_s = s
+            prev_u = u
+            have_prev = True
+    return ll
+
+
+@njit(cache=True, fastmath=False)
+def _propagate(phis, roots, idx, lo, hi, x0, z, h, out):  # pragma: no cover - compiled; tested by moments
+    """out[k] = h . x_k with x_k = Phi_k x_{k-1} + S_k z_k (S_k S_k^T = Q_k, block diagonal)."""
+    n = phis.shape[1]
+    x = x0.copy()
+    xp = np.zeros(n)
+    for k in range(out.shape[0]):
+        if k > 0:
+            u = idx[k]
+            for i in range(n):
+                acc = 0.0
+                for m in range(lo[i], hi[i]):
+                    acc += phis[u, i, m] * x[m] + roots[u, i, m] * z[k, m]
+                xp[i] = acc
+            for i in range(n):
+                x[i] = xp[i]
+        acc = 0.0
+        for i in range(n):
+            acc += h[i] * x[i]
+        out[k] = acc
+
+
+@njit(cache=True, fastmath=False)
+def _lines_mean(t, level, f, a, ph, out):  # pragma: no cover - compiled
+    for k in range(t.shape[0]):
+        acc = level
+        for j in range(f.shape[0]):
+            acc += a[j] * math.cos(2.0 * math.pi * f[j] * t[k] + ph[j])
+        out[k] = acc
+
+
+def _root(cov: np.ndarray) -> np.ndarray:
+    """Symmetric square roots of a stack of positive semi-definite matrices."""
+    lam, vec = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    return (vec * np.sqrt(np.clip(lam, 0.0, None))[..., None, :]) @ np.swapaxes(vec, -1, -2)
+
+
+# ------------------------------------------------------------------ spectra (starts, the order search)
+
+
+def spectrum(y: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(frequencies, power) on (0, Nyquist] of the de-meaned series, gaps filled with 0, unpadded:
+    power = |sum y e^{-i w t}|^2 / N_valid, whose mean is sigma^2 for white noise of sd sigma and
+    whose sum over the one-sided bins is N / 2 x the variance (Parseval)."""
+    good = np.isfinite(y)
+    r = np.where(good, y - np.nanmean(y), 0.0)
+    power = np.abs(np.fft.rfft(r)) ** 2 / max(int(good.sum()), 1)
+    freqs = np.fft.rfftfreq(r.size, dt)
+    return freqs[1:], power[1:]
+
+
+def smooth(power: np.ndarray, width: int) -> np.ndarray:
+    """A boxcar running mean of `width` bins (odd), edges by the available bins."""
+    width = max(1, int(width) | 1)
+    if width == 1:
+        return power.copy()
+    kern = np.ones(width)
+    return np.convolve(power, kern, "same") / np.convolve(np.ones_like(power), kern, "same")
+
+
+def spectral_peaks(
+    freqs: np.ndarray, power: np.ndarray, band: tuple[float, float], width: int, separation: float
+) -> list[tuple[float, float]]:
+    """Local maxima of the smoothed power inside `band`, strongest first, at least `separation` Hz
+    apart: (frequency, smoothed power / median smoothed power)."""
+    sm = smooth(power, width)
+    sel = (freqs >= band[0]) & (freqs <= band[1])
+    floor = float(np.median(sm[sel])) if sel.any() else 1.0
+    idx = np.flatnonzero(sel)
+    peaks = [i for i in idx if 0 < i < sm.size - 1 and sm[i] >= sm[i - 1] and sm[i] >= sm[i + 1]]
+    peaks.sort(key=lambda i: -sm[i])
+    out: list[tuple[float, float]] = []
+    for i in peaks:
+        if all(abs(freqs[i] - f) >= separation for f, _ in out):
+            out.append((float(freqs[i]), float(sm[i] / max(floor, 1e-300))))
+    return out
+
+
+def mode_start(freqs: np.ndarray, power: np.ndarray, f0: float, n: int, floor: float) -> tuple[float, float]:
+    """(damping ratio, rms) of a resonance at f0 from a power spectrum (`spectrum` normalization):
+    the half-power width of the smoothed peak, and the band's power above `floor` (Parseval)."""
+    df = freqs[1] - freqs[0]
+    sm = smooth(power, 5)
+    i = int(np.argmin(np.abs(freqs - f0)))
+    top = sm[i]
+    lo = i
+    while lo > 0 and sm[lo] > 0.5 * top:
+        lo -= 1
+    hi = i
+    while hi < sm.size - 1 and sm[hi] > 0.5 * top:
+        hi += 1
+    width = max((hi - lo) * df, 2 * df)
+    zeta = float(np.clip(width / (2.0 * max(f0, df)), 2e-3, 0.3))
+    band = slice(max(0, i - 3 * (i - lo) - 2), min(sm.size, i + 3 * (hi - i) + 3))
+    var = 2.0 / n * float(np.sum(np.clip(power[band] - floor, 0.0, None)))
+    return zeta, float(math.sqrt(max(var, 1e-30)))
+
+
+# ------------------------------------------------------------------ the model
+
+
+def _nest(values: dict[str, float]) -> dict[str, Any]:
+    """Dotted names (`modes[0].frequency`) as a nested table, so that `get_value` reads them."""
+    out: dict[str, Any] = {}
+    for name, v in values.items():
+        node = out
+        parts = name.split(".")
+        for part in parts[:-1]:
+            if part.endswith("]"):
+                base, i = part[:-1].split("[")
+                lst = node.setdefault(base, [])
+                while len(lst) <= int(i):
+                    lst.append({})
+                node = lst[int(i)]
+            else:
+                node = node.setdefault(part, {})
+        node[parts[-1]] = v
+    return out
+
+
+@register_model
+class ModalModel(SignalModel):
+    """A measured series without a scene: K stochastic resonances, L lines, drift, coloured and
+    white noise, one Kalman filter (module docstring)."""
+
+    name = "modal"
+
+    @classmethod
+    def describes(cls, table: dict) -> bool:
+        """The table has a `modal` table."""
+        return isinstance(table, dict) and "modal" in table
+
+    @classmethod
+    def truth_table(cls, table: dict) -> dict:
+        """The true values of a simulated series: its `modal.values` as a nested table."""
+        return _nest(dict((table.get("modal") or {}).get("values") or {}))
+
+    def __init__(self, table: dict, series: Series):
+        self.base = copy.deepcopy(dict(table))
+        self.base.setdefault("modal", {})
+        self.spec = ModalSpec.from_table(self.base)
+        self.series = series
+        self.t = np.ascontiguousarray(series.time, dtype=float)
+        self.y = np.ascontiguousarray(series.intensity, dtype=float)
+        self.good = np.isfinite(self.y)
+        self.n_obs = int(self.good.sum())
+        self.span = float(self.t[-1] - self.t[0])
+        self.dt = series.dt
+        self.sd = float(np.nanstd(self.y)) or 1.0
+        if series.uniform:
+            self.steps = np.array([self.span / (self.t.size - 1)])
+            self.idx = np.zeros(self.t.size, dtype=np.int64)
+        else:
+            self.steps, self.idx = unique_steps(self.t, rtol=1e-9)
+            self.steps = np.ascontiguousarray(self.steps, dtype=float)
+        self._names = self.spec.names()
+        self._layout()
+        self._fixed_values = {k: float(v) for k, v in (self.base["modal"].get("values") or {}).items()}
+        self._start = {k: float(v) for k, v in (self.base["modal"].get("start") or {}).items()}
+        self._base_values: dict[str, float] | None = None
+
+    # -------------------------------------------------------------- state-space layout
+    def _layout(self) -> None:
+        s = self.spec
+        kinds, offsets, sizes = [], [], []
+        o = 0
+        for _ in range(s.modes):
+            kinds.append(_OSC), offsets.append(o), sizes.append(2)
+            o += 2
+        if s.drift == "walk":
+            kinds.append(_WALK), offsets.append(o), sizes.append(1)
+            o += 1
+        elif s.drift == "integrated":
+            kinds.append(_IWALK), offsets.append(o), sizes.append(2)
+            o += 2
+        if s.noise == "ar1":
+            kinds.append(_OU), offsets.append(o), sizes.append(1)
+            o += 1
+        elif s.noise == "1/f":
+            for _ in FLICKER_DECADES:
+                kinds.append(_OU), offsets.append(o), sizes.append(1)
+                o += 1
+        self.n = o
+        self.kinds = np.array(kinds, dtype=np.int64)
+        self.offsets = np.array(offsets, dtype=np.int64)
+        lo, hi = np.zeros(max(o, 1), dtype=np.int64), np.ones(max(o, 1), dtype=np.int64)
+        h = np.zeros(max(o, 1))
+        for off, size in zip(offsets, sizes):
+            lo[off : off + size], hi[off : off + size] = off, off + size
+            h[off] = 1.0  # a mode's q, the drift's level, each Ornstein-Uhlenbeck state
+        if o == 0:  # white noise only: one dummy state that never moves and is not seen
+            self.kinds = np.array([_WALK], dtype=np.int64)
+            self.offsets = np.zeros(1, dtype=np.int64)
+            h[0] = 0.0
+        self.lo, self.hi, self.h = lo, hi, h
+        self._nstate = max(o, 1)
+        self._phis = np.zeros((self.steps.size, self._nstate, self._nstate))
+        self._qs = np.zeros_like(self._phis)
+        self._p0 = np.zeros((self._nstate, self._nstate))
+        self._pars = np.zeros((self.kinds.size, 3))
+        self._mean = np.empty(self.t.size)
+
+    def value(self, values: dict[str, float], name: str) -> float:
+        """A parameter's value: from `values`, else fixed by the table (`values`), else its start
+        (`start`, the order search's optimum), else the first spectral guess."""
+        if name in values:
+            return values[name]
+        if name in self._fixed_values:
+            return self._fixed_values[name]
+        if self._base_values is None:
+            self._base_values = {**self._spectral_guesses()[0], **self._start, **self._fixed_values}
+        return self._base_values[name]
+
+    def tables(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(mean, phis, qs, r) at `values` (P0 in `self._p0`; the arrays are reused between calls)."""
+        s, v = self.spec, lambda n: self.value(values, n)
+        pars = self._pars
+        b = 0
+        for i in range(s.modes):
+            w = 2.0 * math.pi * v(f"modes[{i}].frequency")
+            pars[b, 0], pars[b, 1], pars[b, 2] = w, v(f"modes[{i}].damping_ratio") * w, v(f"modes[{i}].rms")
+            b += 1
+        if s.drift != "none":
+            pars[b, 0] = v("drift.rate") ** 2
+            b += 1
+        if s.noise == "ar1":
+            pars[b, 0], pars[b, 1] = v("ar.time"), v("ar.rms") ** 2
+            b += 1
+        elif s.noise == "1/f":
+            var = v("flicker.rms") ** 2 / len(FLICKER_DECADES)
+            for d in FLICKER_DECADES:
+                pars[b, 0], pars[b, 1] = max(self.span, self.dt) / (2.0 * math.pi) * d, var
+                b += 1
+        if b == 0:
+            pars[0, 0] = 0.0
+        _fill_tables(self.kinds, pars, self.offsets, self.steps, self._phis, self._qs, self._p0)
+        if s.lines:
+            f = np.array([v(f"lines[{j}].frequency") for j in range(s.lines)])
+            a = np.array([v(f"lines[{j}].amplitude") for j in range(s.lines)])
+            ph = np.array([v(f"lines[{j}].phase") for j in range(s.lines)])
+        else:
+            f = a = ph = np.zeros(0)
+        _lines_mean(self.t, float(v("level")), f, a, ph, self._mean)
+        return self._mean, self._phis, self._qs, float(v("noise.sigma")) ** 2
+
+    def _run(self, values: dict[str, float], white: np.ndarray, lls: np.ndarray, freeze: bool = True) -> float:
+        mean, phis, qs, r = self.tables(values)
+        return float(
+            _block_filter(self.y - mean, phis, qs, self.idx, self.lo, self.hi, self.h, r, self._p0, freeze, white, lls)
+        )
+
+    def _sorted(self, values: dict[str, float]) -> bool:
+        """Modes and lines each in strictly increasing frequency (the label-switching constraint)."""
+        for kind, count in (("modes", self.spec.modes), ("lines", self.spec.lines)):
+            prev = -math.inf
+            for i in range(count):
+                f = self.value(values, f"{kind}[{i}].frequency")
+                if not f > prev:
+                    return False
+                prev = f
+        return True
+
+    # -------------------------------------------------------------- SignalModel
+    def fittable(self) -> set[str]:
+        return set(self._names)
+
+    def describe(self) -> dict[str, Any]:
+        return {"kind": "modal", **self.spec.table()}
+
+    def mean(self, values: dict[str, float]) -> np.ndarray:
+        """level + the lines at the data's stamps."""
+        return self.tables(values)[0].copy()
+
+    def log_likelihood(self, values: dict[str, float]) -> float:
+        """The exact Gaussian log-likelihood by the Kalman filter over every state; -inf when the
+        modes' (or the lines') frequencies are not strictly increasing, or a value is outside
+        what the model allows (a negative rms, a damping ratio <= 0 with noise)."""
+        if not self._sorted(values):
+            return -math.inf
+        for n in self._names:
+            val = self.value(values, n)
+            if not math.isfinite(val):
+                return -math.inf
+            if n.endswith(("frequency", "damping_ratio", "time")) and not val > 0:
+                return -math.inf
+            if n.endswith(("rms", "sigma", "rate")) and val < 0:
+                return -math.inf
+        ll = self._run(values, np.empty(0), np.empty(0))
+        return ll if math.isfinite(ll) else -math.inf
+
+    def pointwise_log_likelihood(self, values: dict[str, float]) -> np.ndarray:
+        """Each sample's one-step predictive log density (NaN at gaps); nansum = log_likelihood."""
+        out = np.empty(self.t.size)
+        self._run(values, np.empty(0), out)
+        return out
+
+    def residuals(self, values: dict[str, float]) -> np.ndarray:
+        """Standardized innovations (NaN at gaps): independent N(0, 1) when the model fits."""
+        out = np.empty(self.t.size)
+        self._run(values, out, np.empty(0))
+        return out
+
+    def replicate(self, values: dict[str, float], rng: np.random.Generator) -> np.ndarray:
+        """A draw of the model at the data's stamps (states started in their stationary law, the
+        walk at 0), plus the white noise; NaN at the data's gaps. Compiled, one pass."""
+        mean, phis, qs, r = self.tables(values)
+        x0 = _root(self._p0) @ rng.standard_normal(self._nstate)
+        z = rng.standard_normal((self.t.size, self._nstate))
+        out = np.empty(self.t.size)
+        _propagate(phis, np.ascontiguousarray(_root(qs)), self.idx, self.lo, self.hi, x0, z, self.h, out)
+        out += mean + math.sqrt(r) * rng.standard_normal(self.t.size)
+        out[~self.good] = np.nan
+        return out
+
+    def units(self, name: str) -> tuple[str, str]:
+        """Intensity units for rms values, amplitudes, the level and the sensor noise;
+        intensity / sqrt(s) for the drift rate (intensity / s^1.5 integrated); s for `ar.time`."""
+        iu = intensity_units(self.series)
+        if name.endswith(".rms"):
+            what = {"ar": "AR(1) noise", "flicker": "1/f noise"}.get(name.split(".")[0], "mode")
+            return iu, f"{what} stationary RMS"
+        if name == "drift.rate":
+            if self.spec.drift == "integrated":
+                return f"{iu} s-1.5", "drift rate (RMS slope change per sqrt(second))"
+            return f"{iu} s-0.5", "drift rate (RMS change per sqrt(second))"
+        if name.endswith(".amplitude"):
+            return iu, "line amplitude"
+        if name == "level":
+            return iu, "level at the first sample"
+        if name == "ar.time":
+            return "s", "AR(1) correlation time"
+        return parameter_units(name, iu)
+
+    def default_priors(self) -> dict[str, Prior]:
+        """Frequencies uniform from 3 cycles per record (the least `check_fit` accepts) to Nyquist;
+        damping ratios log-uniform 1e-4..0.9; mode rms log-uniform sd x (1e-4, 10); line amplitudes
+        uniform 0..3 sd; phases uniform(-pi, pi); level uniform over the data's range widened by it
+        on each side; noise.sigma and the coloured noise's rms log-uniform sd x (1e-6, 10); ar.time
+        log-uniform (dt / 5, span); drift.rate log-uniform sd / sqrt(span) x (1e-5, 30). (sd: the
+        data's standard deviation.)"""
+        sd, span, nyq = self.sd, max(self.span, self.dt), 0.5 * self.series.fs
+        lo = 3.0 / span * (1.0 + 1e-9)  # 3 cycles, past rounding (`check_resolves`)
+        ymin, ymax = float(np.nanmin(self.y)), float(np.nanmax(self.y))
+        rng = ymax - ymin
+        out: dict[str, Prior] = {"level": Prior("uniform", (ymin - rng, ymax + rng))}
+        for i in range(self.spec.modes):
+            out[f"modes[{i}].frequency"] = Prior("uniform", (lo, nyq))
+            out[f"modes[{i}].damping_ratio"] = Prior("loguniform", (1e-4, 0.9))
+            out[f"modes[{i}].rms"] = Prior("loguniform", (1e-4 * sd, 10.0 * sd))
+        for j in range(self.spec.lines):
+            out[f"lines[{j}].frequency"] = Prior("uniform", (lo, nyq))
+            out[f"lines[{j}].amplitude"] = Prior("uniform", (0.0, 3.0 * sd))
+            out[f"lines[{j}].phase"] = Prior("uniform", (-math.pi, math.pi))
+        if self.spec.drift != "none":
+            scale = sd / math.sqrt(span) / (span if self.spec.drift == "integrated" else 1.0)
+            out["drift.rate"] = Prior("loguniform", (1e-5 * scale, 30.0 * scale))
+        if self.spec.noise == "ar1":
+            out["ar.rms"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
+            out["ar.time"] = Prior("loguniform", (self.dt / 5.0, span))
+        elif self.spec.noise == "1/f":
+            out["flicker.rms"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
+        out["noise.sigma"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
+        return out
+
+    def _spectral_guesses(self) -> list[dict[str, float]]:
+        """Starting values of every parameter from the periodogram: the K + L strongest peaks of
+        the smoothed spectrum; the lines at the sharpest of them (highest raw bin over its smoothed
+        neighbourhood), the modes at the others (half-power width and band power); a second start
+        with the roles of the sharpest peaks exchanged."""
+        s = self.spec
+        freqs, power = spectrum(self.y, self.steps[0] if self.steps.size == 1 else self.dt)
+        nyq, lo = 0.5 * self.series.fs, 3.0 / max(self.span, self.dt)
+        n = self.n_obs
+        floor = (
+            float(np.median(power[freqs > 0.5 * nyq])) / math.log(2.0)
+            if np.any(freqs > 0.5 * nyq)
+            else float(np.median(power))
+        )
+        width = max(3, round(0.002 * freqs.size) | 1)
+        peaks = spectral_peaks(freqs, power, (lo, nyq * 0.999), width, separation=3 * width * (freqs[1] - freqs[0]))
+        need = s.modes + s.lines
+        while len(peaks) < need:  # fewer peaks than components: spread the rest over the band
+            peaks.append((lo + (nyq - lo) * (len(peaks) + 1) / (need + 1), 1.0))
+        picked = [f for f, _ in peaks[:need]]
+        sharp = []
+        for f in picked:
+            i = int(np.argmin(np.abs(freqs - f)))
+            win = slice(max(0, i - width), i + width + 1)
+            sharp.append(float(power[win].max() / max(np.mean(power[win]), 1e-300)))
+        order = list(np.argsort(sharp)[::-1])
+        assignments = [order]
+        if s.lines and s.modes:
+            assignments.append(order[s.lines :] + order[: s.lines])
+        base = {
+            "level": float(np.nanmean(self.y[: max(16, self.t.size // 50)]))
+            if s.drift != "none"
+            else float(np.nanmean(self.y)),
+            "noise.sigma": math.sqrt(max(floor, 1e-30 * self.sd**2)),
+            "drift.rate": 0.1 * self.sd / math.sqrt(max(self.span, self.dt)),
+            "ar.rms": 0.5 * self.sd,
+            "ar.time": 10.0 * self.dt,
+            "flicker.rms": 0.3 * self.sd,
+        }
+        if s.drift == "integrated":
+            base["drift.rate"] /= max(self.span, self.dt)
+        out = []
+        from vibinverse.spectrum import sinusoid
+
+        y0 = self.y - np.nanmean(self.y)
+        for assign in assignments:
+            g = dict(base)
+            line_f = sorted(picked[i] for i in assign[: s.lines])
+            mode_f = sorted(picked[i] for i in assign[s.lines :])
+            for i, f in enumerate(mode_f):
+                zeta, rms = mode_start(freqs, power, f, n, floor)
+                g[f"modes[{i}].frequency"], g[f"modes[{i}].damping_ratio"], g[f"modes[{i}].rms"] = f, zeta, rms
+            for j, f in enumerate(line_f):
+                i = int(np.argmin(np.abs(freqs - f)))  # the highest raw bin near the smoothed peak
+                i = max(i - width, 0) + int(np.argmax(power[max(i - width, 0) : i + width + 1]))
+                fine = np.linspace(freqs[max(i - 1, 0)], freqs[min(i + 1, freqs.size - 1)], 21)
+                best = max(fine, key=lambda ff: sinusoid(self.t, y0, ff)[0])
+                a, ph, _ = sinusoid(self.t, y0, best)
+                g[f"lines[{j}].frequency"], g[f"lines[{j}].amplitude"], g[f"lines[{j}].phase"] = float(best), a, ph
+            out.append({k: g[k] for k in self._names})
+        return out
+
+    def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
+        """The table's `start` first (the order search's optimum), else the spectral starts
+        (`_spectral_guesses`)."""
+        spectral = self._spectral_guesses()
+        if self._start:
+            return [{**spectral[0], **self._start}]
+        return spectral
+
+    def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
+        """Each line (its amplitude to 0) and each mode (its rms to 0)."""
+        out = []
+        for j in range(self.spec.lines):
+            f = f"lines[{j}].frequency"
+            out.append(LineTest(f"line_{j}", {f"lines[{j}].amplitude": 0.0}, f if f in free else None))
+        for i in range(self.spec.modes):
+            f = f"modes[{i}].frequency"
+            out.append(LineTest(f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None))
+        return out
+
+    def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
+        """The observed information -d^2 log L / d theta^2 at `values` (its expectation is the
+        Fisher information), by central finite differences of the exact log-likelihood: a first
+        pass gives each parameter's curvature with a step of 1e-4 of its scale, the second uses a
+        step of 0.1 / sqrt(curvature) (a tenth of the parameter's sd), so that every step is small
+        against the likelihood's width whatever the units."""
+        v0 = {**{n: self.value(values, n) for n in self._names}, **values}
+        ll = lambda d: self._run({**v0, **d}, np.empty(0), np.empty(0), freeze=False)
+        f0 = ll({})
+        steps = []
+        for n in names:
+            scale = (
+                abs(v0[n]) if not n.endswith("phase") and n != "level" else (1.0 if n.endswith("phase") else self.sd)
+            )
+            h = 1e-4 * max(scale, 1e-6 * self.sd if n != "level" else self.sd)
+            curv = -(ll({n: v0[n] + h}) - 2 * f0 + ll({n: v0[n] - h})) / h**2
+            h2 = 0.1 / math.sqrt(curv) if curv > 0 and math.isfinite(curv) else h
+            if not n.endswith("phase") and n != "level" and v0[n] > 0:
+                h2 = min(h2, 0.5 * v0[n])
+            steps.append(h2)
+        k = len(names)
+        out = np.zeros((k, k))
+        for a in range(k):
+            na, ha = names[a], steps[a]
+            out[a, a] = -(ll({na: v0[na] + ha}) - 2 * f0 + ll({na: v0[na] - ha})) / ha**2
+            for b in range(a):
+                nb, hb = names[b], steps[b]
+                pp = ll({na: v0[na] + ha, nb: v0[nb] + hb})
+                pm = ll({na: v0[na] + ha, nb: v0[nb] - hb})
+                mp = ll({na: v0[na] - ha, nb: v0[nb] + hb})
+                mm = ll({na: v0[na] - ha, nb: v0[nb] - hb})
+                out[a, b] = out[b, a] = -(pp - pm - mp + mm) / (4 * ha * hb)
+        return out
+
+    # -------------------------------------------------------------- what the order search reads
+    def components(self, values: dict[str, float]) -> list[dict[str, Any]]:
+        """The fitted components at `values`, JSON-able: the level, each mode, each line (with
+        `harmonic_of` the index of the line it is a harmonic of, within one resolution bin
+        1 / span of a multiple, else None), the drift, the coloured and the white noise."""
+        v = lambda n: float(self.value(values, n))
+        s = self.spec
+        out: list[dict[str, Any]] = [{"kind": "level", "level": v("level")}]
+        for i in range(s.modes):
+            out.append(
+                {
+                    "kind": "mode",
+                    "index": i,
+                    "frequency": v(f"modes[{i}].frequency"),
+                    "damping_ratio": v(f"modes[{i}].damping_ratio"),
+                    "rms": v(f"modes[{i}].rms"),
+                }
+            )
+        freqs = [v(f"lines[{j}].frequency") for j in range(s.lines)]
+        for j in range(s.lines):
+            source, multiple = harmonic_of(freqs, j, 1.0 / max(self.span, self.dt))
+            out.append(
+                {
+                    "kind": "line",
+                    "index": j,
+                    "frequency": freqs[j],
+                    "amplitude": v(f"lines[{j}].amplitude"),
+                    "phase": v(f"lines[{j}].phase"),
+                    "harmonic_of": source,
+                    "harmonic": multiple,
+                }
+            )
+        if s.drift != "none":
+            out.append({"kind": "drift", "model": s.drift, "rate": v("drift.rate")})
+        if s.noise == "ar1":
+            out.append({"kind": "coloured noise", "model": "ar1", "rms": v("ar.rms"), "time": v("ar.time")})
+        elif s.noise == "1/f":
+            out.append({"kind": "coloured noise", "model": "1/f", "rms": v("flicker.rms")})
+        out.append({"kind": "white noise", "sigma": v("noise.sigma")})
+        return out
+
+
+def harmonic_of(freqs: list[float], j: int, resolution: float) -> tuple[int | None, int | None]:
+    """(index of the lowest line whose multiple m >= 2 lies within `resolution` of line j, m), or
+    (None, None)."""
+    for i, f0 in enumerate(freqs):
+        if i == j or f0 <= 0 or freqs[j] < 1.5 * f0:
+            continue
+        m = round(freqs[j] / f0)
+        if m >= 2 and abs(freqs[j] - m * f0) <= resolution:
+            return i, m
+    return None, None
