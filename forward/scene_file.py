@@ -22,7 +22,9 @@ from forward.validation import MAX_DEPTH, Table, check_depth, one_line
 
 MAX_SAMPLES = 100_000_000
 MAX_FILE_BYTES = 16 * 2**20  # a scene file holds settings, not data; this also bounds reading a device or pipe
-_INCLINATION = {"lo": 0.0, "hi": math.pi / 2, "lo_open": True}
+# an elevation of 1e-9 rad is far below any observable geometry (refraction alone bends light by ~1e-2
+# rad at the horizon); below it, denormal angles broke the solvers (5e-324 gave an SVD failure)
+_INCLINATION = {"lo": 1e-9, "hi": math.pi / 2}
 _POSITIVE = {"lo": 0.0, "lo_open": True}
 
 

@@ -141,7 +141,7 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
     return _result({"sensitivity": s}, written)
 
 
-DEMO_WORKERS = 1  # a pool of 2 made the sampling slower (17 s against 10 s): per-step messaging costs more than it saves
+DEMO_WORKERS = 1  # a pool of 2 made the sampling slower (17 s against 10 s): messaging costs more than it saves
 DEMO_STEPS = 7000  # the demo converges in ~1600 steps (R-hat <= 1.01, ESS >= 400); the cap keeps it < 3 min
 
 
