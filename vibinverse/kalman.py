@@ -41,7 +41,7 @@ else:
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def _filter(y, phi, q, h, r, p0, white):  # pragma: no cover - compiled; checked against the reference
     n = phi.shape[0]
     x = np.zeros(n)
@@ -167,7 +167,7 @@ def discretize_continuous(
 # ------------------------------------------------------------------ per-step (Phi, Q): irregular stamps
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def _filter_steps(y, phis, qs, idx, h, r, p0, white, lls):  # pragma: no cover - compiled; checked against the reference
     """`_filter` with step k's (Phi, Q) = (phis[idx[k]], qs[idx[k]]); writes the standardized
     innovations to `white` and each sample's log density to `lls` when they are not empty (NaN at
@@ -302,7 +302,7 @@ _SERIES_BELOW = 0.5
 _SERIES_TERMS = 20  # Taylor terms of g; g^2 grows at 2R: truncation (2 R t)^18 / 18! < 2e-16
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def oscillator_fill(w, a, kappa, steps, phis, qs, b):  # pragma: no cover - compiled; tested against expm
     """Fill the 2 x 2 block at (b, b) of phis[u], qs[u] for every step steps[u]: the exact
     transition and process-noise covariance of x = (q, q'), q'' + 2 a q' + w^2 q = xi(t), xi white
@@ -396,7 +396,7 @@ def oscillator_stationary(omega: float, zeta: float, kappa: float = 1.0) -> NDAr
     return np.diag([kappa / (4.0 * a * omega * omega), kappa / (4.0 * a)]) if a > 0 else np.diag([np.inf, np.inf])
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def _propagate_states(phis, roots, idx, x0, z, out):  # pragma: no cover - compiled; tested by its moments
     n = phis.shape[1]
     for i in range(n):

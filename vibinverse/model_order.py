@@ -32,6 +32,13 @@ penalty per added line or mode (3 parameters: frequency, amplitude or damping, p
 (`vibinverse.detection`) asks of a line at a known frequency. A drift costs 0.5 ln n, AR(1) noise
 ln n, 1/f noise 0.5 ln n.
 
+Each mode and line also pays the look-elsewhere term 2 ln M, M = (Nyquist - 1 / span) x span the
+independent frequencies its frequency was searched over (the term the detection test adds to its
+threshold, `vibinverse.detection.threshold`): BIC's Occam factor assumes a parameter known to
+within its prior's unit information, but a frequency taken at the highest of M peaks gains
+~ln M from noise alone. Without it, white noise plus one line grew a spurious broad mode and a second
+line in one of three seeds (each with Delta BIC of only -1 to -2).
+
 A line within one resolution bin (1 / span) of a multiple m >= 2 of a lower line is recorded as
 that line's harmonic (`harmonic_of`, `harmonic` in the components): one source.
 """
@@ -49,7 +56,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from vibinverse.errors import NumericalError
-from vibinverse.io.series import Series
+from vibinverse.io.series import MIN_CYCLES, Series
 from vibinverse.models.modal import ModalModel, ModalSpec, mode_start, smooth, spectrum
 from vibinverse.priors import ParameterSpace
 
@@ -74,7 +81,14 @@ class OrderFit:
 
     @property
     def bic(self) -> float:
-        return -2.0 * self.log_likelihood + self.k * math.log(self.n)
+        """BIC plus the look-elsewhere term: 2 ln M for each mode and line, M the independent
+        frequencies searched (module docstring)."""
+        searched = self.spec.modes + self.spec.lines
+        return (
+            -2.0 * self.log_likelihood
+            + self.k * math.log(self.n)
+            + 2.0 * searched * math.log(self.model.frequencies_searched)
+        )
 
 
 @dataclass
@@ -207,7 +221,7 @@ def candidates(fit: OrderFit, series: Series, search: dict[str, bool], caps: tup
     model = fit.model
     dt = float(model.steps[0]) if model.steps.size == 1 else series.dt
     span = max(model.span, dt)
-    lo, nyq = 3.0 / span, 0.5 / dt
+    lo, nyq = MIN_CYCLES / span, 0.5 / dt
     e = model.residuals(values)
     freqs, power = spectrum(e, dt)
     band = (freqs >= lo) & (freqs < 0.999 * nyq)

@@ -25,6 +25,7 @@ import html
 import io
 import math
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -61,6 +62,41 @@ def _png(fig) -> str:
 
     plt.close(fig)
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+
+
+def _drawn_elsewhere(render: Callable[[], str]) -> Callable[[], str]:
+    """Start `render` (a figure to a PNG data URI) in a forked process and return the function that
+    waits for its result, so that the other figures are drawn meanwhile on the other core (the
+    corner plot alone is a third of a report's time). Where fork is unavailable, or the child
+    fails, the figure is drawn here."""
+    import multiprocessing as mp
+
+    if "fork" not in mp.get_all_start_methods():
+        return render
+    ctx = mp.get_context("fork")
+    receive, send = ctx.Pipe(duplex=False)
+
+    def child() -> None:
+        try:
+            send.send(render())
+        except Exception:  # noqa: BLE001 - the parent draws it instead
+            send.send(None)
+
+    proc = ctx.Process(target=child, daemon=True)
+    proc.start()
+    send.close()
+
+    def result() -> str:
+        try:
+            value = receive.recv()
+        except EOFError:
+            value = None
+        finally:
+            receive.close()
+            proc.join()
+        return value if isinstance(value, str) else render()
+
+    return result
 
 
 def readable_units(units: Any) -> str:
@@ -206,6 +242,12 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
             f"{format_number(alt.get('delta_log_posterior'), '.1f')} below in log posterior (5 sigma would be 12.5). "
             "Which line is which is not decided by these data: a longer record or a prior on the resonance decides."
         )
+    few = d.get("few_cycles")
+    for n, cycles in few.items() if isinstance(few, dict) else ():
+        out.append(
+            f"{n} goes through only {format_number(cycles, '.1f')} cycles in the record: it is poorly constrained "
+            "(a slow sway, a drift or a mode are hard to tell apart over so few cycles); a longer record decides."
+        )
     for det in detections(d):
         if not det.detected:
             out.append(
@@ -334,6 +376,7 @@ def _figures(summary: dict, idata: Any, v: Verdict, names: list[str], safe: dict
         band, band_label = None, ""
     figs: list[tuple[str, str, str]] = []
     fmin = 1.0 / max(float(t[-1] - t[0]), 1e-300) if n > 1 else math.nan
+    corner_png = _corner(summary, idata, safe, names) if _real_draws(summary, idata) else None
 
     # the strongest line: the largest gain among the detected lines with a frequency
     framed = [ln for ln in v.lines if math.isfinite(ln.value) and ln.value > 0]
@@ -450,16 +493,7 @@ def _figures(summary: dict, idata: Any, v: Verdict, names: list[str], safe: dict
         figs.append(("Power spectral density", _png(fig), caption + "; dashed: the lines tested (red: detected)."))
 
     if _real_draws(summary, idata):
-        draws = _draws(idata, "posterior", safe, names)
-        params = summary["parameters"]
-        labels = [
-            _label(
-                f"{n.split('.')[-1]} ({params[n].get('units')})"
-                if isinstance(params[n].get("units"), str)
-                else n.split(".")[-1]
-            )
-            for n in names
-        ]
+        labels = _parameter_labels(summary, names)
         inv = {val: k for k, val in safe.items()}
         fig, axes = plt.subplots(
             len(names), 1, figsize=(9, 1.4 * len(names) + 0.6), sharex=True, constrained_layout=True
@@ -469,20 +503,46 @@ def _figures(summary: dict, idata: Any, v: Verdict, names: list[str], safe: dict
             ax.set_ylabel(lab, fontsize=7)
         np.atleast_1d(axes)[-1].set_xlabel("draw (after burn-in)")
         figs.append(("Traces", _png(fig), "Every walker's draws of every parameter: stationary, overlapping chains."))
-        if draws is not None and draws.shape[0] > draws.shape[1]:
-            import corner
-
-            truths = [as_number(p.get("truth")) for p in params.values()]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                fig = corner.corner(
-                    draws,
-                    labels=labels,
-                    quantiles=[0.05, 0.5, 0.95],
-                    truths=truths if all(math.isfinite(x) for x in truths) else None,
-                )
-            figs.append(("Corner plot", _png(fig), "Pairwise posterior; dashed: 5, 50 and 95 % quantiles."))
+        if corner_png is not None:
+            figs.append(("Corner plot", corner_png(), "Pairwise posterior; dashed: 5, 50 and 95 % quantiles."))
     return figs
+
+
+def _parameter_labels(summary: dict, names: list[str]) -> list[str]:
+    params = summary["parameters"]
+    return [
+        _label(
+            f"{n.split('.')[-1]} ({params[n].get('units')})"
+            if isinstance(params[n].get("units"), str)
+            else n.split(".")[-1]
+        )
+        for n in names
+    ]
+
+
+def _corner(summary: dict, idata: Any, safe: dict, names: list[str]) -> Callable[[], str] | None:
+    """The corner plot of the posterior draws, started in the background (`_drawn_elsewhere`):
+    the function that returns its PNG, or None when there are too few draws."""
+    draws = _draws(idata, "posterior", safe, names)
+    if draws is None or draws.shape[0] <= draws.shape[1]:
+        return None
+    labels = _parameter_labels(summary, names)
+    truths = [as_number(p.get("truth")) for p in summary["parameters"].values()]
+
+    def render() -> str:
+        import corner
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fig = corner.corner(
+                draws,
+                labels=labels,
+                quantiles=[0.05, 0.5, 0.95],
+                truths=truths if all(math.isfinite(x) for x in truths) else None,
+            )
+        return _png(fig)
+
+    return _drawn_elsewhere(render)
 
 
 # ------------------------------------------------------------------ the page

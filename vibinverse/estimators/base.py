@@ -9,6 +9,8 @@ and the model's predictive band.
 from __future__ import annotations
 
 import logging
+import math
+import re
 import time
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
@@ -18,6 +20,7 @@ import numpy as np
 from vibinverse.checks import residual_checks
 from vibinverse.detection import line_detection
 from vibinverse.errors import Unsupported
+from vibinverse.io.series import FEW_CYCLES, Series
 from vibinverse.models.base import intensity_units
 from vibinverse.posterior import Posterior
 from vibinverse.result import FitResult
@@ -90,6 +93,7 @@ def complete(result: FitResult, posterior: Posterior) -> FitResult:
     result.truth = posterior.truth()
     result.units = {n: model.units(n) for n in result.names}
     result.diagnostics.update(line_detection(posterior, result.point))
+    result.diagnostics["few_cycles"] = few_cycles(series, result.point)
     draws = result.draws if result.chains is not None else result.approximate_draws
     result.predictive = predictive(posterior, result.point, draws)
     try:
@@ -110,6 +114,18 @@ def complete(result: FitResult, posterior: Posterior) -> FitResult:
         except Unsupported as exc:
             logger.debug("no log_likelihood or posterior_predictive group: %s", exc)
     return result
+
+
+def few_cycles(series: Series, point: dict[str, float]) -> dict[str, float]:
+    """Frequencies (Hz) at the point estimate that go through fewer than FEW_CYCLES cycles in the
+    record, with their number of cycles: poorly constrained, whatever their interval says.
+    (`drive_frequency[0]` and `modes[0].frequency` alike: the name without its indices ends in it.)"""
+    span = float(series.time[-1] - series.time[0]) if series.time.size > 1 else 0.0
+    out = {}
+    for name, value in point.items():
+        if re.sub(r"\[\d+\]", "", name).endswith("frequency") and math.isfinite(value) and value * span < FEW_CYCLES:
+            out[name] = float(value * span)
+    return out
 
 
 #: values stored per group (log_likelihood, posterior_predictive): draws x samples <= this

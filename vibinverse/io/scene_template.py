@@ -26,6 +26,7 @@ from forward.scene_file import MAX_SAMPLES, load_scene
 from forward.validation import interval, one_line
 from vibinverse.errors import InputError
 from vibinverse.io.atomic import write_all
+from vibinverse.io.series import MIN_CYCLES
 
 __all__ = ["SceneAnswers", "check_answer", "flag", "scene_template", "toml_string", "write_scene_template"]
 
@@ -341,8 +342,9 @@ def _view(a: SceneAnswers, sun: tuple[float, float]) -> tuple[float, float, list
 def _render(a: SceneAnswers, sun_lines: list[str], sun: tuple[float, float]) -> str:
     view_inc, view_az, view_note = _view(a, sun)
     nyq = a.fs / 2
-    # the frame model's default frequency priors start at 3 cycles in the record (first to last sample)
-    lo = max(0.2, 3.0 / (a.duration - 1.0 / a.fs)) if a.duration * a.fs > 2 else 0.2
+    # the frame model's default frequency priors start at MIN_CYCLES in the record (first to last
+    # sample), at least 0.2 Hz
+    lo = max(0.2, MIN_CYCLES / (a.duration - 1.0 / a.fs) * (1.0 + 1e-9)) if a.duration * a.fs > 2 else 0.2
     g = lambda v: f"{v:.4g}"  # prior bounds, rounded for reading
     r = a.resonance
     lateral = r * 2 / math.sqrt(3)  # as in the paper's frame: lateral 4 Hz for a 2 sqrt(3) Hz tilt

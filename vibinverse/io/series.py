@@ -24,6 +24,11 @@ from vibinverse.io import jsonio
 # a uniform grid's tolerance, relative to its step: a timing error of 1e-3 of a sample moves a line at
 # Nyquist by 3e-3 rad, far below any phase a fit resolves
 UNIFORM_RTOL = 1e-3
+#: the fewest cycles of a frequency the record must hold for a prior to reach it (a structure
+#: swaying through one or two cycles in a clip is still fitted, and flagged: FEW_CYCLES)
+MIN_CYCLES = 1.0
+#: below this many cycles in the record a frequency is poorly constrained, and the summary says so
+FEW_CYCLES = 3.0
 #: how the readers note a time reference and the intensity's units (`Series.notes`)
 TIME_REFERENCE_NOTE = "time: seconds since "
 UNITS_NOTE = "intensity units: "
@@ -573,15 +578,15 @@ def _in_range(a: np.ndarray, what: str) -> None:
 
 def check_resolves(series: Series, frequency_hz: float, what: str) -> None:
     """One-line error when the series cannot resolve `frequency_hz`: at or above Nyquist, or fewer than
-    3 cycles in the record."""
+    MIN_CYCLES cycles in the record."""
     nyquist = 0.5 * series.fs
     if frequency_hz >= nyquist:
         raise InputError(f"{what}: {frequency_hz:g} Hz is at or above the Nyquist frequency {nyquist:g} Hz of the data")
     span = series.time[-1] - series.time[0]
-    if frequency_hz * span < 3.0:
+    if frequency_hz * span < MIN_CYCLES:
         raise InputError(
-            f"{what}: {frequency_hz:g} Hz needs at least {3.0 / frequency_hz:g} s of data "
-            f"(3 cycles); the series spans {span:g} s"
+            f"{what}: {frequency_hz:g} Hz needs at least {MIN_CYCLES / frequency_hz:g} s of data "
+            f"({MIN_CYCLES:g} cycle); the series spans {span:g} s"
         )
 
 

@@ -51,6 +51,9 @@ class SignalModel(ABC):
     casadi_bytes_per_sample: ClassVar[float] = 50e3
     #: values a scene file may leave out, with the value the forward model then uses
     scene_defaults: ClassVar[dict[str, float]] = {}
+    #: the likelihood spends most of its time in compiled kernels that release the GIL (numba
+    #: nogil), so the sampler's walkers are evaluated by threads (no fork, no pickling)
+    releases_gil: ClassVar[bool] = False
 
     series: Series
     base: dict[str, Any]

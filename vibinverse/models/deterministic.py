@@ -33,7 +33,7 @@ from forward.validation import Table
 from vibinverse.errors import SceneError, Unsupported
 from vibinverse.fisher import response_fisher
 from vibinverse.io.scenes import scene_of
-from vibinverse.io.series import Series, with_sampling
+from vibinverse.io.series import MIN_CYCLES, Series, with_sampling
 from vibinverse.models.base import LineTest, SignalModel, register_model
 from vibinverse.models.deterministic_spectral import free_name, gain_from_level, response_guesses
 from vibinverse.priors import ParameterSpace, Prior
@@ -382,7 +382,7 @@ class DeterministicModel(SignalModel):
         if not lines:
             raise SceneError("fit: the scene's motions have no frequency and amplitude to fit; give an [infer] table")
         nyq = 0.5 * series.fs
-        lo = max(3.0 / (series.time[-1] - series.time[0]), 1e-6)
+        lo = max(MIN_CYCLES / (series.time[-1] - series.time[0]) * (1.0 + 1e-9), 1e-6)
         f0 = sorted(self.base_value(ln.frequency) for ln in lines)
         same = [a for a, b in itertools.pairwise(f0) if a == b]
         if same:

@@ -34,7 +34,7 @@ from forward.reduce import rigid_observation
 from vibinverse.errors import NumericalError, SceneError, Unsupported
 from vibinverse.fisher import frame_fisher
 from vibinverse.io.scenes import scene_of
-from vibinverse.io.series import Series, with_sampling
+from vibinverse.io.series import MIN_CYCLES, Series, with_sampling
 from vibinverse.kalman import (
     log_likelihood,
     log_likelihood_steps,
@@ -111,6 +111,7 @@ class FrameModel(SignalModel):
     noise a random tilt; the exact likelihood is a Kalman filter on the tilt modes."""
 
     name = "frame"
+    releases_gil = True  # numba nogil kernels, and `components` allocates per call (no shared scratch)
     map_start_margin = 50.0  # a swapped drive/resonance assignment starts far below the best
     casadi_bytes_per_sample = 25e3  # unexpanded MX graph and IPOPT: 12 kB a sample measured (4000 samples)
 
@@ -405,9 +406,9 @@ class FrameModel(SignalModel):
     # ------------------------------------------------------------------ what the estimators need
     def default_priors(self) -> dict[str, Prior]:
         """Tilt resonance and damping, the drive line's frequency, amplitude and phase, both noise
-        levels. Frequencies from 3 cycles in the record to Nyquist."""
+        levels. Frequencies from MIN_CYCLES (1) cycle in the record (at least 0.2 Hz) to Nyquist."""
         nyq = 0.5 * self.series.fs
-        lo = max(0.2, 3.0 / (self.t[-1] - self.t[0]))  # at least 3 cycles in the record
+        lo = max(0.2, MIN_CYCLES / (self.t[-1] - self.t[0]) * (1.0 + 1e-9))
         k = self.key
         return {
             k + "tilt_frequency": Prior("uniform", (lo, nyq)),
@@ -489,7 +490,7 @@ class FrameModel(SignalModel):
 _ANCHOR = 64  # samples between exact re-anchors of the rotation recurrence
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _drive_mean_kernel(t, dt, w, qx, qy, x0, jx, jy, hxx, hxy, hyy, out):  # pragma: no cover - compiled
     """out[k] = x0 + J g + g'Hg/2 at t[k] on a uniform grid of step dt, g = (-ry, rx), (rx, ry) =
     Re((qx, qy) e^{i w t}). e^{i w t} advances by a rotation of w dt per sample and is recomputed
@@ -516,7 +517,7 @@ def _drive_mean_kernel(t, dt, w, qx, qy, x0, jx, jy, hxx, hxy, hyy, out):  # pra
         out[k] = x0 + jx * gx + jy * gy + 0.5 * (hxx * gx * gx + 2.0 * hxy * gx * gy + hyy * gy * gy)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _drive_mean_at(t, w, qx, qy, x0, jx, jy, hxx, hxy, hyy, out):  # pragma: no cover - compiled
     """out[k] = x0 + J g + g'Hg/2 at any stamps t[k] (each sinusoid evaluated at each stamp)."""
     for k in range(out.shape[0]):

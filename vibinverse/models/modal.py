@@ -53,13 +53,14 @@ from __future__ import annotations
 
 import copy
 import math
+import threading
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from vibinverse.errors import SceneError
-from vibinverse.io.series import Series
+from vibinverse.io.series import MIN_CYCLES, Series
 from vibinverse.kalman import njit, unique_steps
 from vibinverse.models.base import LineTest, SignalModel, intensity_units, parameter_units, register_model
 from vibinverse.priors import Prior
@@ -153,7 +154,7 @@ class ModalSpec:
 # ------------------------------------------------------------------ compiled kernels
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def _oscillator(w, a, kappa, t, phi, q, o):  # pragma: no cover - compiled; tested against expm
     """The exact (Phi, Q) of x = (q, q'), q'' + 2 a q' + w^2 q = xi (intensity kappa), over a step
     t, written into the 2 x 2 block at (o, o). With uS = e^{-at} sin(bt) / b, uC = e^{-at} cos(bt),
@@ -211,7 +212,7 @@ def _oscillator(w, a, kappa, t, phi, q, o):  # pragma: no cover - compiled; test
     q[o + 1, o + 1] = 0.25 * kappa * (em + 2.0 * us * uc - 2.0 * a * us * us)
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def _fill_tables(kinds, pars, offsets, steps, phis, qs, p0):  # pragma: no cover - compiled
     """(Phi, Q) of every block for every step, and the initial covariance P0. Block b starts at
     state offsets[b]; kinds: oscillator (w, a = zeta w, rms), random walk (rate^2), integrated
@@ -251,7 +252,7 @@ def _fill_tables(kinds, pars, offsets, steps, phis, qs, p0):  # pragma: no cover
             p0[o, o] = var
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def _predict_cov(p, phi, q, bs, bz):  # pragma: no cover - compiled
     """P <- Phi P Phi^T + Q in place, Phi and Q block diagonal (block b: states bs[b] .. bs[b] +
     bz[b] - 1, bz 1 or 2), block pair by block pair in closed form (the upper triangle, mirrored)."""
@@ -313,7 +314,7 @@ def _predict_cov(p, phi, q, bs, bz):  # pragma: no cover - compiled
                 p[ob, oa] = m
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls):  # pragma: no cover - compiled
     """log p(y) of x_k = Phi_k x_{k-1} + w_k, y_k = h . x_k + v_k with block-diagonal Phi_k
     (= phis[idx[k]]; state i's block is lo[i]..hi[i]) and Q_k, x_0 ~ N(0, P0); NaN gaps skipped.
@@ -454,7 +455,7 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls):  # pr
     return ll
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def _propagate(phis, roots, idx, lo, hi, x0, z, h, out):  # pragma: no cover - compiled; tested by moments
     """out[k] = h . x_k with x_k = Phi_k x_{k-1} + S_k z_k (S_k S_k^T = Q_k, block diagonal)."""
     n = phis.shape[1]
@@ -476,7 +477,7 @@ def _propagate(phis, roots, idx, lo, hi, x0, z, h, out):  # pragma: no cover - c
         out[k] = acc
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def _lines_mean(t, level, f, a, ph, out):  # pragma: no cover - compiled
     for k in range(t.shape[0]):
         acc = level
@@ -580,6 +581,7 @@ class ModalModel(SignalModel):
     white noise, one Kalman filter (module docstring)."""
 
     name = "modal"
+    releases_gil = True  # numba nogil kernels; per-thread scratch arrays (`_scratch`)
 
     @classmethod
     def describes(cls, table: dict) -> bool:
@@ -650,11 +652,25 @@ class ModalModel(SignalModel):
             h[0] = 0.0
         self.lo, self.hi, self.h = lo, hi, h
         self._nstate = max(o, 1)
-        self._phis = np.zeros((self.steps.size, self._nstate, self._nstate))
-        self._qs = np.zeros_like(self._phis)
-        self._p0 = np.zeros((self._nstate, self._nstate))
-        self._pars = np.zeros((self.kinds.size, 3))
-        self._mean = np.empty(self.t.size)
+        # the tables' arrays, reused between calls, one set per thread (`releases_gil`: threads
+        # evaluate walkers at once); a dict by thread id stays picklable
+        self._buffers: dict[int, tuple[np.ndarray, ...]] = {}
+
+    def _scratch(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(phis, qs, p0, pars, mean) of the calling thread."""
+        key = threading.get_ident()
+        out = self._buffers.get(key)
+        if out is None:
+            phis = np.zeros((self.steps.size, self._nstate, self._nstate))
+            out = (
+                phis,
+                np.zeros_like(phis),
+                np.zeros((self._nstate, self._nstate)),
+                np.zeros((self.kinds.size, 3)),
+                np.empty(self.t.size),
+            )
+            self._buffers[key] = out
+        return out
 
     def value(self, values: dict[str, float], name: str) -> float:
         """A parameter's value: from `values`, else fixed by the table (`values`), else its start
@@ -667,10 +683,10 @@ class ModalModel(SignalModel):
             self._base_values = {**self._spectral_guesses()[0], **self._start, **self._fixed_values}
         return self._base_values[name]
 
-    def tables(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        """(mean, phis, qs, r) at `values` (P0 in `self._p0`; the arrays are reused between calls)."""
+    def tables(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray]:
+        """(mean, phis, qs, r, P0) at `values` (the arrays are reused by the next call in this thread)."""
         s, v = self.spec, lambda n: self.value(values, n)
-        pars = self._pars
+        phis, qs, p0, pars, mean = self._scratch()
         b = 0
         for i in range(s.modes):
             w = 2.0 * math.pi * v(f"modes[{i}].frequency")
@@ -689,20 +705,20 @@ class ModalModel(SignalModel):
                 b += 1
         if b == 0:
             pars[0, 0] = 0.0
-        _fill_tables(self.kinds, pars, self.offsets, self.steps, self._phis, self._qs, self._p0)
+        _fill_tables(self.kinds, pars, self.offsets, self.steps, phis, qs, p0)
         if s.lines:
             f = np.array([v(f"lines[{j}].frequency") for j in range(s.lines)])
             a = np.array([v(f"lines[{j}].amplitude") for j in range(s.lines)])
             ph = np.array([v(f"lines[{j}].phase") for j in range(s.lines)])
         else:
             f = a = ph = np.zeros(0)
-        _lines_mean(self.t, float(v("level")), f, a, ph, self._mean)
-        return self._mean, self._phis, self._qs, float(v("noise.sigma")) ** 2
+        _lines_mean(self.t, float(v("level")), f, a, ph, mean)
+        return mean, phis, qs, float(v("noise.sigma")) ** 2, p0
 
     def _run(self, values: dict[str, float], white: np.ndarray, lls: np.ndarray, freeze: bool = True) -> float:
-        mean, phis, qs, r = self.tables(values)
+        mean, phis, qs, r, p0 = self.tables(values)
         return float(
-            _block_filter(self.y - mean, phis, qs, self.idx, self.lo, self.hi, self.h, r, self._p0, freeze, white, lls)
+            _block_filter(self.y - mean, phis, qs, self.idx, self.lo, self.hi, self.h, r, p0, freeze, white, lls)
         )
 
     def _sorted(self, values: dict[str, float]) -> bool:
@@ -717,6 +733,12 @@ class ModalModel(SignalModel):
         return True
 
     # -------------------------------------------------------------- SignalModel
+    @property
+    def frequencies_searched(self) -> float:
+        """M = (Nyquist - MIN_CYCLES / span) x span, the independent frequencies a mode's or line's
+        frequency prior spans (at least 1): the order search's look-elsewhere term."""
+        return max(1.0, (0.5 * self.series.fs - MIN_CYCLES / max(self.span, self.dt)) * self.span)
+
     def fittable(self) -> set[str]:
         return set(self._names)
 
@@ -759,8 +781,8 @@ class ModalModel(SignalModel):
     def replicate(self, values: dict[str, float], rng: np.random.Generator) -> np.ndarray:
         """A draw of the model at the data's stamps (states started in their stationary law, the
         walk at 0), plus the white noise; NaN at the data's gaps. Compiled, one pass."""
-        mean, phis, qs, r = self.tables(values)
-        x0 = _root(self._p0) @ rng.standard_normal(self._nstate)
+        mean, phis, qs, r, p0 = self.tables(values)
+        x0 = _root(p0) @ rng.standard_normal(self._nstate)
         z = rng.standard_normal((self.t.size, self._nstate))
         out = np.empty(self.t.size)
         _propagate(phis, np.ascontiguousarray(_root(qs)), self.idx, self.lo, self.hi, x0, z, self.h, out)
@@ -788,14 +810,14 @@ class ModalModel(SignalModel):
         return parameter_units(name, iu)
 
     def default_priors(self) -> dict[str, Prior]:
-        """Frequencies uniform from 3 cycles per record (the least `check_fit` accepts) to Nyquist;
+        """Frequencies uniform from MIN_CYCLES (1) cycle per record (the least `check_fit` accepts) to Nyquist;
         damping ratios log-uniform 1e-4..0.9; mode rms log-uniform sd x (1e-4, 10); line amplitudes
         uniform 0..3 sd; phases uniform(-pi, pi); level uniform over the data's range widened by it
         on each side; noise.sigma and the coloured noise's rms log-uniform sd x (1e-6, 10); ar.time
         log-uniform (dt / 5, span); drift.rate log-uniform sd / sqrt(span) x (1e-5, 30). (sd: the
         data's standard deviation.)"""
         sd, span, nyq = self.sd, max(self.span, self.dt), 0.5 * self.series.fs
-        lo = 3.0 / span * (1.0 + 1e-9)  # 3 cycles, past rounding (`check_resolves`)
+        lo = MIN_CYCLES / span * (1.0 + 1e-9)  # past rounding (`check_resolves`)
         ymin, ymax = float(np.nanmin(self.y)), float(np.nanmax(self.y))
         rng = ymax - ymin
         out: dict[str, Prior] = {"level": Prior("uniform", (ymin - rng, ymax + rng))}
@@ -825,7 +847,7 @@ class ModalModel(SignalModel):
         with the roles of the sharpest peaks exchanged."""
         s = self.spec
         freqs, power = spectrum(self.y, self.steps[0] if self.steps.size == 1 else self.dt)
-        nyq, lo = 0.5 * self.series.fs, 3.0 / max(self.span, self.dt)
+        nyq, lo = 0.5 * self.series.fs, MIN_CYCLES / max(self.span, self.dt)
         n = self.n_obs
         floor = (
             float(np.median(power[freqs > 0.5 * nyq])) / math.log(2.0)
