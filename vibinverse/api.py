@@ -5,6 +5,12 @@ thin layer over these functions.
     scene = vi.load_scene("examples/scenes/roof_frame.toml", ["noise.sigma=0.6"])
     result = vi.fit(series, scene, method="casadi")
     result.summary()["parameters"]; result.detections; result.to_netcdf("result.nc")
+
+An observation that is a video or an image cube:
+
+    cube = vi.open_video("roof.mp4")                 # xarray (time, y, x), lazy, frame stamps as time
+    found = vi.detect(cube)                           # per-pixel detection map, lines, pixel clusters
+    result = vi.fit(cube, pixels=found.cluster(1))    # the cluster's pixels fitted jointly
 """
 
 from __future__ import annotations
@@ -25,10 +31,48 @@ from vibinverse.posterior import Posterior
 from vibinverse.priors import Prior, parse_free, parse_prior
 from vibinverse.result import Detection, FitResult
 
-__all__ = ["Observation", "design", "detect", "fit", "load_scene", "load_series", "posterior", "series", "simulate"]
+__all__ = [
+    "Observation",
+    "design",
+    "detect",
+    "fit",
+    "load_scene",
+    "load_series",
+    "open_cube",
+    "open_video",
+    "posterior",
+    "series",
+    "simulate",
+    "simulate_cube",
+]
 
 SceneLike = str | Path | Mapping[str, Any]
 SeriesLike = str | Path | Series
+
+
+def open_cube(
+    path: str | Path,
+    *,
+    fps: float | None = None,
+    channel: str = "luminance",
+    chunks: int | None = None,
+    variable: str | None = None,
+) -> Any:
+    """An image cube or a video as a lazy `xarray.DataArray` (time, y, x): video (each frame's
+    presentation time stamp), Photron .cih/.mraw, TIFF stacks, .npy, netCDF, zarr
+    (`vibinverse.io.cube.open_cube`)."""
+    from vibinverse.io.cube import open_cube as _open
+
+    return _open(path, fps=fps, channel=channel, chunks=chunks, variable=variable)
+
+
+open_video = open_cube  # the same reader; the name an analyst with a video looks for
+
+
+def _is_cube(data: Any) -> bool:
+    import xarray as xr
+
+    return isinstance(data, xr.DataArray) and data.ndim == 3
 
 
 def _table(scene: SceneLike, overrides: Sequence[str] = ()) -> dict[str, Any]:
@@ -151,8 +195,17 @@ def fit(
     workers: int = 1,
     max_steps: int = 20000,
     progress: bool = False,
+    pixels: Any = None,
+    **cube_options: Any,
 ) -> FitResult:
     """Fit a measured series against the scene that describes the observation.
+
+    A cube (`open_cube`; an `xarray.DataArray` (time, y, x)) is fitted jointly over `pixels`
+    ("all", a boolean (y, x) mask, a mask file, or "DIR/detection.nc:K" for cluster K of a
+    detection map; `DetectionMap.cluster(K)` gives that mask): shared vibration parameters, a gain
+    (with its sign), offset and noise level per pixel, through the sufficient statistic
+    (`vibinverse.imaging.joint_fit.fit_pixels`, whose options `cube_options` passes on:
+    displacement, scale, band, reference).
 
     method: spectral | sindy | casadi | map | mcmc | auto (spectral -> SINDy -> casadi -> emcee,
     each seeding the next). `chain` is the emcee checkpoint (HDF5; `resume` continues it); without
@@ -166,6 +219,16 @@ def fit(
     """
     from vibinverse.pipeline import run
 
+    if _is_cube(series) or pixels is not None:
+        if not _is_cube(series):
+            raise InputError("pixels: needs an image cube (vi.open_cube), not a single series")
+        from vibinverse.imaging.joint_fit import fit_pixels
+
+        options = {"method": method, "free": free, "model": model, "overrides": overrides, "seed": seed}
+        options.update(chain=chain, resume=resume, workers=workers, max_steps=max_steps, progress=progress)
+        return fit_pixels(series, "all" if pixels is None else pixels, scene, **cube_options, **options)
+    if cube_options:
+        raise InputError(f"{sorted(cube_options)[0]}: only for an image cube (with pixels=...)")
     if workers < 1 or max_steps < 1:
         raise InputError("workers and max_steps: must be >= 1")
     if resume and chain is None:
@@ -191,16 +254,29 @@ def fit(
 
 
 def detect(
-    data: SeriesLike | FitResult,
+    data: SeriesLike | FitResult | Any,
     scene: SceneLike | None = None,
     *,
     free: Mapping[str, Prior | str] | None = None,
     model: str | None = None,
     overrides: Sequence[str] = (),
-) -> list[Detection]:
+    **map_options: Any,
+) -> list[Detection] | Any:
     """Which lines the data show: the detection test of every line of the model (log-likelihood
     gain against a 5-sigma threshold with the look-elsewhere term) at the MAP, or of a fit's result.
-    Without a scene: of the modal model's lines and modes, its order chosen from the data."""
+    Without a scene: of the modal model's lines and modes, its order chosen from the data.
+
+    An image cube (`open_cube`) gets its per-pixel detection map instead (a `DetectionMap`: maps,
+    lines, pixel clusters; `vibinverse.imaging.detection_map.detection_map`, whose options
+    `map_options` passes on: band, alpha, max_lines, scheduler, workers, memory)."""
+    if _is_cube(data):
+        from vibinverse.imaging.detection_map import detection_map
+
+        if scene is not None or free or model or overrides:
+            raise InputError("detect: a cube's detection map takes no scene, free parameters or model")
+        return detection_map(data, **map_options)
+    if map_options:
+        raise InputError(f"{sorted(map_options)[0]}: only for an image cube")
     if isinstance(data, FitResult):
         return data.detections
     return fit(data, scene, method="casadi", free=free, model=model, overrides=overrides).detections
@@ -216,6 +292,16 @@ def simulate(
     table = _table(scene, overrides)
     with scene_errors():
         return observe(scene_of(table), seed, rtol)
+
+
+def simulate_cube(scene: SceneLike, nx: int, ny: int, *, seed: int | None = None, overrides: Sequence[str] = ()) -> Any:
+    """An imager of nx x ny pixels over the scene's footprint (the field of view), each pixel its
+    own footprint through the forward model's fast path (`forward.imager.render_cube`)."""
+    from forward.imager import render_cube
+
+    table = _table(scene, overrides)
+    with scene_errors():
+        return render_cube(scene_of(table), nx, ny, seed=seed)
 
 
 def design(

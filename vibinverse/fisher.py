@@ -16,11 +16,13 @@ which are smooth closed forms: there is no simulated noise in them.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.linalg import toeplitz
 
+from vibinverse.errors import InputError
 from vibinverse.kalman import whiten
 
 if TYPE_CHECKING:
@@ -185,3 +187,37 @@ def response_fisher(
         sigma = values["noise.sigma"]
         fisher[i, i] = float(np.sum(2 * sigma**2 / var**2))
     return fisher
+
+
+def multi_pixel_fisher(
+    single: Callable[[dict[str, float], list[str]], np.ndarray],
+    values: dict[str, float],
+    names: list[str],
+    gains: Sequence[float] | np.ndarray,
+    sigmas: Sequence[float] | np.ndarray,
+    noise: str = "noise.sigma",
+) -> np.ndarray:
+    """Fisher information of the shared parameters `names` from N pixels y_i = c_i + g_i s + e_i
+    (e_i white with sd sigma_i, independent; gains relative to the pixel `single` describes, whose
+    Fisher information `single(values, names)` gives at its white-noise sd `values[noise]`).
+
+    The joint likelihood is the likelihood of the combined series z = sum_i g_i (y_i - c_i) /
+    sigma_i^2 / w, the one-pixel model with white noise of sd w^-1/2, w = sum_i g_i^2 / sigma_i^2,
+    times a factor free of `names` (DESIGN.md sec. 9; derived in `vibinverse.imaging.joint_fit`),
+    so the information is `single` at `values[noise]` = w^-1/2: for a deterministic signal (a
+    drive line, a free decay) w times that of a unit pixel, N-fold for N equal pixels of either
+    sign; for a noise-driven resonance more than N-fold while the white noise dominates its peak,
+    and saturating once the process noise does. Gains, offsets and noise levels are taken as known:
+    estimating them costs a frequency nothing to first order, an amplitude the uncertainty of the
+    reference gain. Design: `multi_pixel_fisher(lambda v, n: frame_fisher(like, v, n), values,
+    names, [1.0] * N, [sigma] * N)`; `crlb_from_fisher` gives the bounds."""
+    g = np.asarray(gains, dtype=float).reshape(-1)
+    s = np.asarray(sigmas, dtype=float).reshape(-1)
+    if g.size != s.size or g.size == 0:
+        raise InputError(f"gains and sigmas: {g.size} and {s.size} values; one of each per pixel is needed")
+    if not (np.all(s > 0) and np.all(np.isfinite(s)) and np.all(np.isfinite(g))):
+        raise InputError("sigmas: every pixel's noise sd must be finite and > 0 (gains finite)")
+    w = float(np.sum(g**2 / s**2))
+    if not w > 0:
+        raise InputError("gains: all zero; the pixels carry no information on the shared signal")
+    return single({**values, noise: 1.0 / np.sqrt(w)}, names)

@@ -2,7 +2,7 @@
 (`vibinverse.api`); no logic the API lacks.
 
 One rule for every verb that writes files: `-o DIR` is an output directory (created if missing)
-into which the verb writes fixed file names, listed in its help in one pattern (`_output_option`).
+into which the verb writes fixed file names, listed in its help in one pattern (`vibinverse.cli.outputs.output_option`).
 Every verb returns its results and the paths it wrote as a dict, which `--json` prints as one strict
 JSON document on stdout (`vibinverse.cli.main`; the log then goes to stderr).
 """
@@ -19,6 +19,7 @@ from typing import Any
 
 from forward.reduce import DEFAULT_RTOL, compile_scene
 from vibinverse import __version__, api
+from vibinverse.cli.outputs import created, output_dir, output_option
 from vibinverse.errors import InputError, scene_errors
 from vibinverse.io import jsonio
 from vibinverse.io.atomic import check_paths, write_all
@@ -48,53 +49,9 @@ class _Parser(argparse.ArgumentParser):
 # ---------------------------------------------------------------- -o DIR and --json, for every verb
 
 
-def _output_dir(path: str | Path) -> Path:
-    """`-o DIR`, checked before any work: an existing directory we may write into, or a path where
-    one can be made (one-line InputError if not). Nothing is created here (`_created` does that)."""
-    out = Path(path)
-    try:
-        first = next((p for p in (out, *out.parents) if p.exists()), Path.cwd())
-    except OSError as exc:
-        raise InputError(f"-o: cannot create directory {out}: {exc.strerror or exc}") from None
-    if not first.is_dir():
-        if first == out:
-            raise InputError(f"-o: {out} is not a directory; give a directory")
-        raise InputError(f"-o: cannot create directory {out}: {first} is not a directory")
-    if not os.access(first, os.W_OK | os.X_OK):
-        raise InputError(f"-o: cannot {'write into' if first == out else 'create'} directory {out}: permission denied")
-    return out
-
-
-@contextlib.contextmanager
-def _created(out: Path) -> Iterator[Path]:
-    """Make the output directory `out` (and missing parents) for the block; when the block fails,
-    remove the directories it made that are still empty, so that a refused run leaves nothing."""
-    made = [p for p in (out, *out.parents) if not p.exists()]  # deepest first
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"-o: cannot create directory {out}: {exc.strerror or exc}") from None
-    try:
-        yield out
-    except BaseException:
-        for p in made:
-            try:
-                p.rmdir()
-            except OSError:
-                break
-        raise
-
-
 def _check_outputs(outputs: dict[str, Path | None], inputs: dict[str, str | Path | None]) -> None:
     """`check_paths` with each output named by the option that placed it ("-o" files by name)."""
     check_paths({(k if k.startswith("--") else f"-o {Path(k).name}"): p for k, p in outputs.items()}, inputs)
-
-
-def _output_option(parser: argparse.ArgumentParser, default: str | None, writes: str, shown: str = "") -> None:
-    """The `-o DIR` option of a verb that writes files: one help pattern for all verbs
-    ("output directory (default: X); writes a.csv, b.png"; tests/vibinverse/cli/test_commands.py)."""
-    help = f"output directory (default: {shown or default}); writes {writes}"
-    parser.add_argument("-o", "--output", metavar="DIR", default=default, help=help)
 
 
 def _result(doc: dict[str, Any], paths: list[Path]) -> dict[str, Any]:
@@ -129,10 +86,15 @@ def _simulate_to(
 def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
     if not (0 < args.rtol < float("inf")):
         raise InputError(f"--rtol: {args.rtol:g} is outside the allowed range (0, inf)")
-    out = _output_dir(args.output)
+    if args.image is not None:
+        return _simulate_image(args)
+    for option, given in (("--video", args.video), ("--video-fps", args.video_fps is not None)):
+        if given:
+            raise InputError(f"{option}: needs --image NX,NY (a video is rendered from an image cube)")
+    out = output_dir(args.output)
     csv, png = out / SERIES, (out / SERIES_PLOT if args.plot else None)
     _check_outputs({SERIES: csv, SERIES_PLOT: png}, {"scene": args.scene})
-    with _created(out):
+    with created(out):
         s = _simulate_to(
             Path(args.scene), args.set or [], args.seed, csv, png, None if args.dense else args.rtol, args.explain
         )
@@ -141,7 +103,71 @@ def cmd_simulate(args: argparse.Namespace) -> dict[str, Any]:
     return _result({"sensitivity": s}, written)
 
 
-DEMO_WORKERS = 1  # a pool of 2 made the sampling slower (17 s against 10 s): messaging costs more than it saves
+CUBE, CUBE_PLOT, VIDEO = "cube.nc", "cube.png", "video.mp4"  # simulate --image
+
+
+def _image_size(text: str) -> tuple[int, int]:
+    """--image NX,NY: two pixel counts in [1, MAX_PIXELS_PER_SIDE] (one-line InputError)."""
+    from forward.imager import MAX_PIXELS_PER_SIDE
+
+    parts = text.split(",")
+    allowed = f"two integers NX,NY in the allowed range [1, {MAX_PIXELS_PER_SIDE}]"
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise InputError(f"--image: {text!r} is not {allowed}")
+    nx, ny = (int(p) for p in parts)
+    if not (1 <= nx <= MAX_PIXELS_PER_SIDE and 1 <= ny <= MAX_PIXELS_PER_SIDE):
+        raise InputError(f"--image: {nx},{ny} is outside {allowed}")
+    return nx, ny
+
+
+def _simulate_image(args: argparse.Namespace) -> dict[str, Any]:
+    """simulate --image NX,NY: the footprint as an NX x NY-pixel cube (cube.nc), its mean frame
+    (cube.png, --plot) and an 8-bit video of it (video.mp4, --video)."""
+    import numpy as np
+
+    from forward.imager import render_cube
+    from vibinverse.io.cube_writer import MAX_FPS, plot_cube, quantization_for, write_cube_netcdf, write_video
+
+    nx, ny = _image_size(args.image)
+    if args.video_fps is not None:
+        if not args.video:
+            raise InputError("--video-fps: needs --video (it is the video's nominal frame rate)")
+        if not (0 < args.video_fps <= MAX_FPS):
+            raise InputError(f"--video-fps: {args.video_fps:g} is outside the allowed range (0, {MAX_FPS:g}]")
+    out = output_dir(args.output)
+    nc, png, video = out / CUBE, (out / CUBE_PLOT if args.plot else None), (out / VIDEO if args.video else None)
+    _check_outputs({CUBE: nc, CUBE_PLOT: png, VIDEO: video}, {"scene": args.scene})
+    with created(out):
+        scene, table = read_scene(Path(args.scene), args.set or [])
+        with scene_errors():
+            cube = render_cube(scene, nx, ny, seed=args.seed, rtol=None if args.dense else args.rtol)
+        if args.explain:
+            logger.info(cube.explain())
+        fs = scene.sampling.fs
+        doc: dict[str, Any] = {"shape": list(cube.shape), "fs": fs, "evaluation": cube.evaluation}
+        writers = {nc: lambda p: write_cube_netcdf(p, cube, table, args.seed, __version__)}
+        if png is not None:
+            outlines = [(s.name, s.x, s.y) for s in scene.surfaces]
+            title = str(table.get("title") or Path(args.scene).stem)
+            writers[png] = lambda p: plot_cube(p, cube, outlines, title)
+        if video is not None:
+            quant = quantization_for(cube.intensity_clean)  # the clean range, with a margin for the noise
+            fps = args.video_fps if args.video_fps is not None else fs
+            meta = {"capture_fps": fs, "seed": args.seed, "source": f"vibinverse {__version__} simulate --image"}
+            frames = cube.intensity
+            writers[video] = lambda p: write_video(p, frames, fps, quantization=quant, metadata=meta, suffix=".mp4")
+            doc.update(video_fps=fps, quantization=quant.as_dict())
+        write_all(writers)
+    written = [p for p in (nc, png, video) if p is not None]
+    s_max = float(np.nanmax(cube.sensitivity)) if np.any(np.isfinite(cube.sensitivity)) else float("nan")
+    logger.info(
+        f"cube of {ny} x {nx} pixels x {cube.shape[0]} samples, largest pixel sensitivity S = {s_max:.4e} "
+        f"(eq. 21); wrote {', '.join(map(str, written))}"
+    )
+    return _result({**doc, "sensitivity_max": s_max}, written)
+
+
+DEMO_WORKERS = 1  # threads (`ThreadMap`) gave no gain here: the stage after sampling is serial; a pool was slower
 DEMO_STEPS = 7000  # the demo converges in ~1600 steps (R-hat <= 1.01, ESS >= 400); the cap keeps it < 3 min
 
 
@@ -150,12 +176,12 @@ def cmd_demo(args: argparse.Namespace) -> dict[str, Any]:
     emcee) and write the report: the main job on built-in defaults."""
     from vibinverse.report import write_report
 
-    out = _output_dir(args.output)
+    out = output_dir(args.output)
     scene = builtin_scene(DEMO_SCENE)
     csv, png = out / SERIES, out / SERIES_PLOT
     warm = _compile_in_background()
     _check_outputs({n: out / n for n in (SERIES, SERIES_PLOT, RESULT, SUMMARY, CHAIN, REPORT)}, {})
-    with _created(out), warm:
+    with created(out), warm:
         s = _simulate_to(scene, list(DEMO_SET), args.seed, csv, png)
         logger.info(
             f"demo: paper sec. 4.2 roof on a resonant frame, 20 s at 200 Hz, sensitivity S = {s:.3e}; wrote {csv}"
@@ -220,12 +246,12 @@ def _compile_in_background() -> Iterator[None]:
 def cmd_study(args: argparse.Namespace) -> dict[str, Any]:
     from vibinverse.studies import STUDIES
 
-    out = _output_dir(args.output)
+    out = output_dir(args.output)
     names = list(STUDIES) if args.name == "all" else [args.name]
     files = {f"{n}.{ext}": out / f"{n}.{ext}" for n in names for ext in STUDY_FILES}
     _check_outputs(files, {})
     studies = {}
-    with _created(out):
+    with created(out):
         for name in names:
             line = STUDIES[name][0](out)
             logger.info(line)
@@ -234,41 +260,62 @@ def cmd_study(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def cmd_fit(args: argparse.Namespace) -> dict[str, Any]:
+    from vibinverse.cli import fit_cube as cube_fit
     from vibinverse.priors import parse_free
 
     if args.workers < 1 or args.max_steps < 1:
         raise InputError("--workers and --max-steps: must be >= 1")
-    out = _output_dir(args.output)
+    if args.pixels is None:
+        cube_fit.check_series_options(args)
+    out = output_dir(args.output)
     nc = out / RESULT
     summary_path = Path(args.summary) if args.summary else out / SUMMARY
     chain = Path(args.chain) if args.chain else out / CHAIN
+    pixels_csv = None if args.pixels is None else out / cube_fit.PIXELS
     _check_outputs(
-        {RESULT: nc, "--summary" if args.summary else SUMMARY: summary_path, "--chain" if args.chain else CHAIN: chain},
-        {"data": args.data, "--scene": args.scene},
+        {
+            RESULT: nc,
+            "--summary" if args.summary else SUMMARY: summary_path,
+            "--chain" if args.chain else CHAIN: chain,
+            cube_fit.PIXELS: pixels_csv,
+        },
+        {
+            "data": args.data,
+            "--scene": args.scene,
+            "--pixels": None if args.pixels is None else cube_fit.selection_file(args.pixels),
+        },
     )
     if args.summary and not summary_path.parent.is_dir():
         raise InputError(f"--summary: cannot write {summary_path}: no such directory")
-    with _created(out):
-        series = api.load_series(args.data, time_column=args.time_column, value_column=args.value_column, fs=args.fs)
-        table = _fit_table(args)
-        free = parse_free(args.free or [], table.get("infer"))
-        logger.info(f"data: {series.describe()}")
-        for note in series.notes:
-            logger.info(f"data: {note}")
-        result = api.fit(
-            series,
-            table,
-            method=args.method,
-            free=free or None,
-            seed=args.seed,
-            chain=chain,
-            resume=args.resume,
-            workers=args.workers,
-            max_steps=args.max_steps,
-            progress=not args.no_progress,
-        )
+    with created(out):
+        options = {
+            "method": args.method,
+            "seed": args.seed,
+            "chain": chain,
+            "resume": args.resume,
+            "workers": args.workers,
+            "max_steps": args.max_steps,
+            "progress": not args.no_progress,
+        }
+        if args.pixels is not None:  # a cube: many pixels fitted jointly (vibinverse.cli.fit_cube)
+            table = _fit_table(args)
+            free = parse_free(args.free or [], table.get("infer"))
+            result = cube_fit.fit_cube(args, table, {**options, "free": free or None})
+        else:
+            series = api.load_series(
+                args.data, time_column=args.time_column, value_column=args.value_column, fs=args.fs
+            )
+            table = _fit_table(args)
+            free = parse_free(args.free or [], table.get("infer"))
+            logger.info(f"data: {series.describe()}")
+            for note in series.notes:
+                logger.info(f"data: {note}")
+            result = api.fit(series, table, free=free or None, **options)
         summary = result.summary()
-        write_all({nc: result.to_netcdf, summary_path: lambda p: p.write_text(jsonio.dumps(summary, indent=2))})
+        writers = {nc: result.to_netcdf, summary_path: lambda p: p.write_text(jsonio.dumps(summary, indent=2))}
+        if pixels_csv is not None:
+            writers[pixels_csv] = lambda p: cube_fit.write_pixels_csv(p, result)
+        write_all(writers)
     for name, v in summary["parameters"].items():
         interval = "" if v["q05"] is None else f"  90% [{v['q05']:.6g}, {v['q95']:.6g}]"
         truth = "" if v["truth"] is None else f"  truth {v['truth']:.6g}"
@@ -277,6 +324,7 @@ def cmd_fit(args: argparse.Namespace) -> dict[str, Any]:
         if not d.detected:
             logger.info(f"  no {d.what} detected (log-likelihood gain {d.delta_loglike:.1f} < {d.threshold:.1f})")
     written = [nc, summary_path, *([chain] if result.chains is not None and chain.exists() else [])]
+    written += [pixels_csv] if pixels_csv is not None else []
     logger.info(f"wrote {', '.join(map(str, written))}")
     logger.info(f"verdict: {verdict(summary).headline}")
     return _result(summary, written)
@@ -311,9 +359,9 @@ def _fit_table(args: argparse.Namespace) -> dict[str, Any]:
 def cmd_report(args: argparse.Namespace) -> dict[str, Any]:
     from vibinverse.report import write_report
 
-    out = _output_dir(args.output if args.output is not None else Path(args.result).parent)
+    out = output_dir(args.output if args.output is not None else Path(args.result).parent)
     _check_outputs({REPORT: out / REPORT}, {"result": args.result})
-    with _created(out):
+    with created(out):
         path = write_report(Path(args.result), out)
     logger.info(f"wrote {path}")
     return _result({}, [path])
@@ -323,9 +371,9 @@ def cmd_design(args: argparse.Namespace) -> dict[str, Any]:
     from vibinverse.design.ranking import score
     from vibinverse.design.sweep import write_design
 
-    out = _output_dir(args.output)
+    out = output_dir(args.output)
     _check_outputs({n: out / n for n in DESIGN_FILES}, {"scene": args.scene})
-    with _created(out):
+    with created(out):
         result = api.design(
             args.scene,
             vary=args.vary or [],
@@ -398,21 +446,31 @@ def _bench_robustness(quick: bool) -> tuple[dict, Any]:
     return result, lambda p: plot(result["rows"], p)
 
 
+def _bench_imaging(quick: bool) -> tuple[dict, Any]:
+    """From image cube to answer: the imager, detection throughput and memory, the multi-pixel fit."""
+    from vibinverse.bench.imaging_bench import plot, run
+
+    result = run(builtin_scene(""), quick)
+    logger.info(f"imaging benchmark: {result['seconds']:.0f} s")
+    return result, lambda p: plot(result, p)
+
+
 #: `vibinverse bench` modes: the flag that picks one (None: the default), its file stem, its runner
 BENCH_MODES: dict[str | None, tuple[str, Any]] = {
     None: ("bench", _bench_forward),
     "estimators": ("estimators", _bench_estimators),
     "robustness": ("robustness", _bench_robustness),
+    "imaging": ("imaging", _bench_imaging),
 }
 
 
 def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
     mode = next((m for m in BENCH_MODES if m is not None and getattr(args, m)), None)
     stem, runner = BENCH_MODES[mode]
-    out = _output_dir(args.output)
+    out = output_dir(args.output)
     js, png = out / f"{stem}.json", out / f"{stem}.png"
     _check_outputs({js.name: js, png.name: png}, {})
-    with _created(out):
+    with created(out):
         result, plotter = runner(args.quick)
         write_all({js: lambda p: p.write_text(jsonio.dumps(result, indent=2)), png: plotter})
     logger.info(f"wrote {js} and {png}")
@@ -460,7 +518,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     sim = sub.add_parser(
-        "simulate", parents=[verbosity, printing], help="scene file -> pixel intensity series (CSV) and its sensitivity"
+        "simulate",
+        parents=[verbosity, printing],
+        help="scene file -> pixel intensity series (CSV) and its sensitivity, or with --image an image cube and video",
     )
     sim.add_argument("scene", help="scene file (TOML)")
     sim.add_argument(
@@ -470,8 +530,36 @@ def build_parser() -> argparse.ArgumentParser:
         help="override a scene value, e.g. --set sensor.inclination='pi/3+0.02' (repeatable)",
     )
     sim.add_argument("--seed", type=int, default=None, help="noise seed (reproducible output)")
-    _output_option(sim, "simulation", f"{SERIES}, {SERIES_PLOT} (with --plot)")
-    sim.add_argument("--plot", action="store_true", help=f"also write {SERIES_PLOT}: the series and its spectrum")
+    output_option(
+        sim,
+        "simulation",
+        f"{SERIES}, {SERIES_PLOT} (with --plot); with --image: {CUBE}, {CUBE_PLOT} (with --plot), "
+        f"{VIDEO} (with --video)",
+    )
+    sim.add_argument(
+        "--plot",
+        action="store_true",
+        help=f"also write {SERIES_PLOT} (the series and its spectrum), or with --image {CUBE_PLOT} (the mean frame "
+        "with the surfaces outlined)",
+    )
+    sim.add_argument(
+        "--image",
+        metavar="NX,NY",
+        help=f"render the footprint as an imager of NX x NY pixels (each 1 to 4096; each pixel sampled by "
+        f"footprint.resolution^2 subpixels) and write the cube {CUBE} (time, y, x) instead of {SERIES}",
+    )
+    sim.add_argument(
+        "--video",
+        action="store_true",
+        help=f"with --image, also write {VIDEO}: the noisy cube as 8-bit gray (lossless H.264), the clean cube's "
+        "range plus 5 %% on each side mapped to counts 0-255 (the mapping is in the file's comment and --json)",
+    )
+    sim.add_argument(
+        "--video-fps",
+        type=float,
+        metavar="F",
+        help="the video's nominal frame rate (default: the scene's sampling.fs), e.g. 30 for a slow-motion file",
+    )
     sim.add_argument(
         "--rtol",
         type=float,
@@ -493,7 +581,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Studies: " + "; ".join(f"{k}: {v[1]}" for k, v in STUDIES.items()),
     )
     study.add_argument("name", choices=[*STUDIES, "all"], help="figure to reproduce, or all")
-    _output_option(study, "studies", ", ".join(f"NAME.{ext}" for ext in STUDY_FILES) + " per study")
+    output_option(study, "studies", ", ".join(f"NAME.{ext}" for ext in STUDY_FILES) + " per study")
     study.set_defaults(func=cmd_study)
 
     fit = sub.add_parser(
@@ -504,7 +592,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fit.add_argument(
         "data",
-        help="series: CSV/TSV (delimiter sniffed; columns time,intensity), Parquet, .npy, .npz or netCDF; NaN = gap",
+        help="series: CSV/TSV (delimiter sniffed; columns time,intensity), Parquet, .npy, .npz or netCDF; NaN = gap; "
+        "with --pixels an image cube or video",
     )
     fit.add_argument("--time-column", metavar="NAME", help="time column of a CSV/TSV or Parquet table (default: time)")
     fit.add_argument(
@@ -545,17 +634,20 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--chain", metavar="FILE", help=f"HDF5 checkpoint of the sampler (default: DIR/{CHAIN})")
     fit.add_argument("--resume", action="store_true", help="continue an interrupted MCMC run from its checkpoint")
     fit.add_argument("--no-progress", action="store_true")
-    _output_option(
+    from vibinverse.cli.fit_cube import PIXELS, add_cube_options
+
+    add_cube_options(fit)
+    output_option(
         fit,
         "fit",
-        f"{RESULT}, {SUMMARY}, {CHAIN} (the MCMC checkpoint)",
+        f"{RESULT}, {SUMMARY}, {CHAIN} (the MCMC checkpoint), {PIXELS} (with --pixels)",
     )
     fit.add_argument("--summary", metavar="FILE", help=f"write the summary JSON here instead (default: DIR/{SUMMARY})")
     fit.set_defaults(func=cmd_fit)
 
     report = sub.add_parser("report", parents=[verbosity, printing], help="result netCDF -> self-contained HTML report")
     report.add_argument("result", help=f"a result file of fit or demo ({RESULT})")
-    _output_option(report, None, REPORT, shown="the result file's directory")
+    output_option(report, None, REPORT, shown="the result file's directory")
     report.set_defaults(func=cmd_report)
 
     design = sub.add_parser(
@@ -581,7 +673,7 @@ def build_parser() -> argparse.ArgumentParser:
     design.add_argument("--set", action="append", metavar="dotted.key=value", help="override a scene value")
     design.add_argument("--workers", type=int, default=1, help="processes")
     design.add_argument("--no-progress", action="store_true")
-    _output_option(design, "design", ", ".join(DESIGN_FILES))
+    output_option(design, "design", ", ".join(DESIGN_FILES))
     design.set_defaults(func=cmd_design)
 
     bench = sub.add_parser(
@@ -592,11 +684,11 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "--quick", action="store_true", help="the same table at lower precision, within 5 minutes on 2 cores"
     )
-    _output_option(
+    output_option(
         bench,
         "bench",
         "bench.json, bench.png (with --estimators: estimators.json, estimators.png; "
-        "with --robustness: robustness.json, robustness.png)",
+        "with --robustness: robustness.json, robustness.png; with --imaging: imaging.json, imaging.png)",
     )
     which = bench.add_mutually_exclusive_group()
     which.add_argument(
@@ -611,14 +703,26 @@ def build_parser() -> argparse.ArgumentParser:
         help="instead: our fits, celerite2 and SSI-cov (pip install '.[peers]') on gaps, jitter, coloured noise, "
         "drift, gain drift, a weak line, three modes and noise alone (~1 h, --quick ~2.5 min)",
     )
+    which.add_argument(
+        "--imaging",
+        action="store_true",
+        help="instead: the imager (64 x 64 px x 4000 frames), detection throughput against a numpy rfft and its "
+        "peak memory, the multi-pixel fit's cost and sd against the number of pixels (~2 min, --quick ~1 min)",
+    )
     bench.set_defaults(func=cmd_bench)
 
     demo = sub.add_parser("demo", parents=[verbosity, printing], help="run the main job on a built-in scene")
-    _output_option(demo, "vibinverse-demo", ", ".join((SERIES, SERIES_PLOT, RESULT, SUMMARY, CHAIN, REPORT)))
+    output_option(demo, "vibinverse-demo", ", ".join((SERIES, SERIES_PLOT, RESULT, SUMMARY, CHAIN, REPORT)))
     demo.add_argument("--seed", type=int, default=0)
     demo.add_argument("--no-progress", action="store_true")
     demo.set_defaults(func=cmd_demo)
     from vibinverse.cli.init_command import add_init_parser
 
     add_init_parser(sub, [verbosity])
+    from vibinverse.cli.extract_command import add_extract_parser
+
+    add_extract_parser(sub, [verbosity, printing])
+    from vibinverse.cli.detect_command import add_detect_parser
+
+    add_detect_parser(sub, [verbosity, printing])
     return p

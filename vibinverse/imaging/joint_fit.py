@@ -1,0 +1,450 @@
+"""Many pixels, one vibration: the joint fit of pixels that see the same signal, at the cost of one
+pass over the pixels plus one single-series fit (DESIGN.md sec. 9; the paper's sec. 5 wish,
+"combine signals from collections of multiple pixels in a near-optimal way").
+
+The model. Pixel i sees
+
+    y_i(t) = c_i + g_i s(t) + e_i(t),    e_i white, N(0, sigma_i^2), independent between pixels,
+
+with s(t) described by any single-series signal model (the modal model, a frame scene, ...) with
+parameters theta, and per pixel a gain g_i (with its sign: facets tilt opposite ways), an offset
+c_i and a noise level sigma_i. With
+
+    w = sum_i g_i^2 / sigma_i^2,    z(t) = sum_i g_i (y_i(t) - c_i) / sigma_i^2 / w,
+
+completing the square in s(t) at each t (the cross term sum_i g_i (y_i - c_i - g_i z) / sigma_i^2
+is w z - w z = 0) gives
+
+    sum_i (y_i - c_i - g_i s)^2 / sigma_i^2 = w (z - s)^2 + sum_i (y_i - c_i - g_i z)^2 / sigma_i^2,
+
+so that p(Y | s) = N(z; s, 1/w) R, and, s having any law given theta (a Gaussian process, a
+deterministic line, a free decay),
+
+    p(Y | theta, g, c, sigma) = p_z(z | theta; white noise 1/w) x R(Y; g, c, sigma),
+    log R = -1/2 sum_t sum_i (y_i(t) - c_i - g_i z(t))^2 / sigma_i^2
+            - T/2 [sum_i log(2 pi sigma_i^2) - log(2 pi / w)],
+
+exactly: p_z is the single-series likelihood of z with white observation noise of variance 1/w,
+and R does not depend on theta. z is a sufficient statistic for theta; its noise is 1/sqrt(w), the
+noise of one pixel over sqrt(N) for N equal pixels, and pixels of opposite signs add.
+
+With r modes seen in different mixtures (pixel i sees sum_j G_ij s_j), the same algebra gives the
+r-dimensional statistic Z = (G^T S^-1 G)^-1 G^T S^-1 (y - c) with noise covariance
+(G^T S^-1 G)^-1 (`combine_modes`); the single-series models take one series, so fitting it is not
+done here.
+
+Per-pixel parameters (`estimate_gains`). The gains are the leading eigenvector of the
+cross-spectral matrix summed over the band of the strongest line or resonance, whitened by the
+noise levels (frequency-domain decomposition, `vibinverse.imaging.pixels.band_gains`): inside the
+band the shared signal dominates, so the gains are found at per-pixel SNRs where a regression over
+the whole record (a power iteration on the full covariance, which the noise dominates) would drift
+away. The noise levels come from each pixel's residual about c_i + g_i z over the whole record,
+whose variance is v_i = sigma_i^2 (1 - p_i), p_i = g_i^2 / (sigma_i^2 w) the pixel's SNR share
+(its own noise is in z): sigma_i^2 = v_i + g_i^2 / w, with w the root of
+sum_i g_i^2 / (w v_i + g_i^2) = 1 (unique for two pixels or more; one pixel keeps the floor of
+its periodogram). The two alternate until the whitened gains settle: two passes over the pixels
+per iteration, 3-5 iterations.
+
+The scale of g and s is not identifiable (g s = (g / k)(k s)). Conventions (`scale_gains`): by
+default the gains are relative to their SNR-weighted mean magnitude (sum_i p_i |g_i| = 1, the
+sign + at the largest share), so that z is in the units of a typical pixel and the scale's error
+averages over the pixels; with a reference pixel (y, x), or "best" (the largest SNR share, the
+default with a scene) that pixel's gain is +1 and its offset 0: z is then that pixel's series,
+level included, so that a scene fitted to it (the pixel that sees the scene's footprint) keeps the
+meaning of its physical parameters. (Choosing the reference by its estimated share biases the
+scale up by the largest of N gain errors: give the pixel when amplitudes matter.) With the
+optical-flow gains (`displacement`) the gains are fixed, -dI/dx of the mean frame per pixel (or
+per metre with `scale`), and s(t) is the displacement.
+
+Rolling shutter: when the cube has a `row_offset` coordinate, the combined series' time is the
+frame time plus the SNR-share weighted mean row offset of the pixels (exact to first order in the
+spread of the offsets against the signal's period).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from time import perf_counter
+from typing import Any
+
+import numpy as np
+from scipy.optimize import brentq
+
+from vibinverse.errors import InputError
+from vibinverse.imaging.pixels import (
+    PixelMatrix,
+    PixelsLike,
+    band_gains,
+    frame_axes,
+    gradient_gains,
+    mean_frame,
+    noise_levels,
+    seed_gains,
+    select_pixels,
+)
+from vibinverse.io.series import UNITS_NOTE, Series, validate
+from vibinverse.result import FitResult
+
+logger = logging.getLogger(__name__)
+
+ITERATIONS = 10  # refinement passes at most (two passes over the pixels each); 3-5 usually reach TOLERANCE
+TOLERANCE = 1e-3  # stop when no entry of the unit vector g / sigma moves more (efficiency loss ~1e-6)
+TABLE_COLUMNS = ("y", "x", "gain", "sign", "offset", "sigma", "snr_share")
+
+
+# ------------------------------------------------------------------ the sufficient statistic
+
+
+def combine(y: np.ndarray, gain: np.ndarray, offset: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, float]:
+    """(z, w) of pixel series y (time, pixel): z = sum_i g_i (y_i - c_i) / sigma_i^2 / w, the
+    sufficient statistic of the shared signal, and w = sum_i g_i^2 / sigma_i^2, the inverse of z's
+    noise variance (module docstring)."""
+    g, c, s = _params(y, gain, offset, sigma)
+    w = float(np.sum(g**2 / s**2))
+    if not w > 0:
+        raise InputError("gain: every pixel has gain 0; the pixels see no shared signal")
+    return (np.asarray(y, dtype=float) - c) @ (g / s**2) / w, w
+
+
+def residual_log_likelihood(y: np.ndarray, gain: np.ndarray, offset: np.ndarray, sigma: np.ndarray) -> float:
+    """log R, the factor of the joint likelihood that does not depend on the shared signal's
+    parameters (module docstring): log p(Y | theta) = log p_z(z | theta; noise 1/w) + log R."""
+    g, c, s = _params(y, gain, offset, sigma)
+    z, w = combine(y, g, c, s)
+    r = (np.asarray(y, dtype=float) - c - np.outer(z, g)) / s
+    t = r.shape[0]
+    return float(-0.5 * np.sum(r**2) - 0.5 * t * (np.sum(np.log(2 * np.pi * s**2)) - math.log(2 * np.pi / w)))
+
+
+def combine_modes(
+    y: np.ndarray, gains: np.ndarray, offset: np.ndarray, sigma: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(Z, C): the r-dimensional statistic of r modes seen in different mixtures, y_i = c_i +
+    sum_j G_ij s_j + e_i: Z = (G^T S^-1 G)^-1 G^T S^-1 (y - c) (time, r), and its noise covariance
+    C = (G^T S^-1 G)^-1 (S = diag sigma^2). The joint likelihood is N(Z; s, C) per sample times a
+    factor free of the modes' parameters, as for one mode."""
+    y = np.asarray(y, dtype=float)
+    gains = np.asarray(gains, dtype=float)
+    if gains.ndim != 2 or gains.shape[0] != y.shape[1]:
+        raise InputError(f"gains: shape {gains.shape}; (pixels, modes) = ({y.shape[1]}, r) is needed")
+    _, c, s = _params(y, gains[:, 0], offset, sigma)
+    a = gains / s[:, None] ** 2
+    info = gains.T @ a
+    try:
+        cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        raise InputError("gains: the modes' mixtures are not independent (G^T S^-1 G is singular)") from None
+    return (y - c) @ a @ cov, cov
+
+
+def _params(y: np.ndarray, gain: Any, offset: Any, sigma: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    n = np.shape(y)[1]
+    g, c, s = (np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in (gain, offset, sigma))
+    if not np.all(s > 0) or not np.all(np.isfinite(s)):
+        raise InputError("sigma: every pixel's noise level must be finite and > 0")
+    return g, c, s
+
+
+# ------------------------------------------------------------------ per-pixel parameters
+
+
+@dataclass(frozen=True)
+class PixelGains:
+    """Per-pixel observation parameters of a joint fit: position (`y`, `x`), `gain` (with its
+    sign), `offset`, `sigma`; `reference` the index of the pixel whose gain is +1 by convention
+    (None: the SNR-weighted convention, or fixed optical-flow gains), `convention` in words, the
+    refinement's
+    `iterations` and whether it `converged`, the seed `band` in Hz (None without seeds)."""
+
+    y: np.ndarray
+    x: np.ndarray
+    gain: np.ndarray
+    offset: np.ndarray
+    sigma: np.ndarray
+    reference: int | None
+    convention: str
+    iterations: int = 0
+    converged: bool = True
+    band: tuple[float, float] | None = None
+
+    @property
+    def information(self) -> float:
+        """w = sum g^2 / sigma^2: the inverse noise variance of the combined series."""
+        return float(np.sum(self.gain**2 / self.sigma**2))
+
+    @property
+    def weights(self) -> np.ndarray:
+        """z = sum_i weights_i (y_i - offset_i)."""
+        return self.gain / self.sigma**2 / self.information
+
+    @property
+    def share(self) -> np.ndarray:
+        """Each pixel's share of the combined SNR^2, g^2 / sigma^2 / w (they sum to 1)."""
+        return self.gain**2 / self.sigma**2 / self.information
+
+    @property
+    def snr_gain(self) -> float:
+        """The combined series' SNR over the best single pixel's: 1 / sqrt(max share) (sqrt(N)
+        for N equal pixels)."""
+        return float(1.0 / math.sqrt(self.share.max()))
+
+    def table(self) -> dict[str, list[Any]]:
+        """The per-pixel table, column by column (`TABLE_COLUMNS`), JSON-able."""
+        return {
+            "y": [int(v) for v in self.y],
+            "x": [int(v) for v in self.x],
+            "gain": [float(v) for v in self.gain],
+            "sign": [int(v) for v in np.sign(self.gain)],
+            "offset": [float(v) for v in self.offset],
+            "sigma": [float(v) for v in self.sigma],
+            "snr_share": [float(v) for v in self.share],
+        }
+
+
+def solve_sigma(v: np.ndarray, gain: np.ndarray) -> np.ndarray | None:
+    """Noise levels sigma_i = sqrt(v_i + g_i^2 / w) from the residual variances v_i of the
+    regressions on z, w the root of sum_i g_i^2 / (w v_i + g_i^2) = 1 (module docstring); None
+    when there is no root (fewer than two pixels with a gain and residual noise)."""
+    g2 = np.asarray(gain, dtype=float) ** 2
+    v = np.asarray(v, dtype=float)
+    use = (g2 > 0) & (v > 0)
+    if use.sum() < 2:
+        return None
+    g2u, vu = g2[use], v[use]
+    h = lambda lw: float(np.sum(g2u / (math.exp(lw) * vu + g2u))) - 1.0
+    hi = math.log(float(np.sum(g2u / vu)))  # h < 0 there: each term < g^2 / (w v)
+    lo = hi - 50.0
+    if not h(lo) > 0:
+        return None
+    w = math.exp(brentq(h, lo, hi, xtol=1e-14, rtol=1e-14))
+    return np.sqrt(np.maximum(v, 0.0) + g2 / w)
+
+
+def _direction(gain: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """The whitened gains g / sigma as a unit vector (the weights' shape, free of the scale)."""
+    u = gain / sigma
+    return u / np.linalg.norm(u)
+
+
+def _combine_pass(matrix: PixelMatrix, gain: np.ndarray, offset: np.ndarray, sigma: np.ndarray, valid: np.ndarray):
+    """(z with NaN at invalid frames, w, log R) in one pass over the pixels."""
+    w = float(np.sum(gain**2 / sigma**2))
+    a = gain / sigma**2 / w
+    z = np.zeros(int(valid.sum()))
+    q = np.zeros_like(z)
+    for sl, block in matrix.blocks():
+        d = block[valid] - offset[sl]
+        z += d @ a[sl]
+        q += (d**2) @ (1.0 / sigma[sl] ** 2)
+    log_r = -0.5 * float(np.sum(q - w * z**2)) - 0.5 * z.size * (
+        float(np.sum(np.log(2 * np.pi * sigma**2))) - math.log(2 * np.pi / w)
+    )
+    out = np.full(valid.size, np.nan)
+    out[valid] = z
+    return out, w, log_r
+
+
+def _residual_pass(matrix: PixelMatrix, z: np.ndarray, valid: np.ndarray, gain: np.ndarray, offset: np.ndarray):
+    """Each pixel's residual variance about c_i + g_i z over the valid frames (ddof 1)."""
+    zv = z[valid]
+    v = np.empty(matrix.n)
+    for sl, block in matrix.blocks():
+        r = block[valid] - offset[sl] - np.outer(zv, gain[sl])
+        v[sl] = np.sum((r - r.mean(axis=0)) ** 2, axis=0) / (zv.size - 1)
+    return v
+
+
+def scale_gains(
+    b: np.ndarray, sigma: np.ndarray, mean: np.ndarray, reference: int | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(gains, offsets) of gains `b` known up to a factor, by the scale convention (module
+    docstring): relative to pixel `reference` (gain +1, offset 0: z is that pixel's series), or
+    with None to the SNR-weighted mean |gain|, sum_i p_i |g_i| = 1 (p the SNR shares; the largest
+    share's sign +), the offsets then putting z's level at the SNR-weighted mean level of the
+    pixels, sum_i p_i mean_i."""
+    if reference is not None:
+        if b[reference] == 0:
+            raise InputError(f"reference: pixel number {reference} of the selection sees no shared signal (gain 0)")
+        g = b / b[reference]
+        return g, mean - g * mean[reference]
+    p = b**2 / sigma**2
+    p = p / p.sum()
+    g = b * np.sign(b[int(np.argmax(p))]) / float(np.sum(p * np.abs(b)))
+    return g, mean - g * float(p @ mean)
+
+
+REFERENCES = ("weighted", "best")  # the scale conventions by name; a pixel (y, x) is the third
+
+
+def estimate_gains(
+    matrix: PixelMatrix,
+    *,
+    gains: np.ndarray | None = None,
+    band: tuple[float, float] | None = None,
+    reference: tuple[int, int] | str = "weighted",
+    iterations: int = ITERATIONS,
+) -> tuple[PixelGains, np.ndarray, float]:
+    """(per-pixel parameters, the combined series z (NaN at frames a pixel misses), log R) of the
+    selected pixels (module docstring): the gains from the seed band's cross-spectral matrix
+    whitened by the noise levels, the noise levels from the residuals about c_i + g_i z, in turn
+    until the weights settle. `gains` fixes the gains (optical flow: s is then in their units);
+    else their scale is set by `reference` (`scale_gains`): "weighted" (the SNR-weighted mean
+    |gain| is 1), "best" (the pixel of the largest SNR share has gain +1), or a pixel (y, x)."""
+    if iterations < 1:
+        raise InputError(f"iterations: {iterations}; allowed range [1, inf)")
+    if isinstance(reference, str) and reference not in REFERENCES:
+        raise InputError(f"reference: {reference!r}; allowed: {', '.join(map(repr, REFERENCES))} or a pixel (y, x)")
+    levels = noise_levels(matrix)
+    valid, mean, floor = levels.valid, levels.mean, levels.sigma
+    ref = None
+    if not isinstance(reference, str):
+        if gains is not None:
+            raise InputError("reference: the optical-flow gains are absolute; there is no reference pixel")
+        hit = np.flatnonzero((matrix.y == reference[0]) & (matrix.x == reference[1]))
+        if hit.size == 0:
+            raise InputError(f"reference: pixel {tuple(reference)} is not among the selected pixels")
+        ref = int(hit[0])
+    seed = None
+    if gains is not None:
+        g = np.asarray(gains, dtype=float)
+        if not np.any(g != 0):
+            raise InputError("displacement: the mean frame has no gradient at the selected pixels (no edge moves)")
+        convention = "fixed (optical flow: -dI/dx of the mean frame per unit displacement)"
+    else:
+        seed = seed_gains(matrix, levels, band)
+        convention = (
+            "relative to the SNR-weighted mean |gain| (sum of share x |gain| = 1)"
+            if reference == "weighted"
+            else "relative to the reference pixel (gain +1, offset 0): the combined series is in its units"
+        )
+    sigma = floor.copy()
+    band_hz = None if seed is None else seed.band
+
+    def observation(sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, int | None]:
+        """(gains, offsets, reference pixel or None) at these noise levels; fixed gains: z's level
+        is 0 (the mean frame's)."""
+        if seed is None:
+            return g, mean.copy(), None
+        b = band_gains(seed.coef, sigma) if matrix.n > 1 else np.ones(1)
+        k = int(np.argmax(b**2 / sigma**2)) if reference == "best" or matrix.n == 1 else ref
+        return (*scale_gains(b, sigma, mean, k), k)
+
+    gain, offset, k = observation(sigma)
+    converged, done = matrix.n == 1, 0  # one pixel: z = (y - c) / g, nothing to weigh
+    while not converged and done < iterations:
+        before = _direction(gain, sigma)
+        z, _, _ = _combine_pass(matrix, gain, offset, sigma, valid)
+        solved = solve_sigma(_residual_pass(matrix, z, valid, gain, offset), gain)
+        sigma = solved if solved is not None else floor
+        gain, offset, k = observation(sigma)
+        after = _direction(gain, sigma)
+        converged = min(np.max(np.abs(after - before)), np.max(np.abs(after + before))) <= TOLERANCE
+        done += 1
+    z, _, log_r = _combine_pass(matrix, gain, offset, sigma, valid)
+    out = PixelGains(matrix.y, matrix.x, gain, offset, sigma, k, convention, done, converged, band_hz)
+    return out, z, log_r
+
+
+# ------------------------------------------------------------------ the joint fit
+
+
+def combined_series(matrix: PixelMatrix, gains: PixelGains, z: np.ndarray, units: str | None, source: str) -> Series:
+    """The combined series as a `Series` (NaN at frames a pixel misses; the SNR-share weighted
+    mean row offset added to the time, module docstring)."""
+    t = matrix.time
+    offsets = matrix.row_offset()
+    if offsets is not None:
+        t = t + float(np.sum(gains.share * offsets))
+    notes = [f"{UNITS_NOTE}{units}"] if units else []
+    return validate(t, z, source, None, notes)
+
+
+def _is_modal(scene: Any, fit_options: Mapping[str, Any]) -> bool:
+    return scene is None or fit_options.get("model") == "modal" or (isinstance(scene, Mapping) and "modal" in scene)
+
+
+def fit_pixels(
+    cube: Any,
+    pixels: PixelsLike,
+    scene: Any = None,
+    *,
+    displacement: str | None = None,
+    scale: float | None = None,
+    band: tuple[float, float] | None = None,
+    reference: tuple[int, int] | str | None = None,
+    iterations: int = ITERATIONS,
+    **fit_options: Any,
+) -> FitResult:
+    """Fit the selected pixels of `cube` (an xarray.DataArray (time, y, x), possibly dask-backed)
+    jointly: per-pixel gains, offsets and noise levels (`estimate_gains`), then one single-series
+    fit (`vibinverse.api.fit(series, scene, **fit_options)`) of the combined series, which is
+    sufficient for the shared parameters (module docstring).
+
+    pixels: "all", a mask file (.npy, .png), "PATH.nc:K" (cluster K of a detection map), a boolean
+    (y, x) array or (y, x) pairs (`vibinverse.imaging.pixels.select_pixels`). displacement "x" or
+    "y": optical-flow gains, s(t) and its amplitudes a displacement in pixels, or in metres with
+    `scale` (metres per pixel). band (Hz): where the gain seeds look (default: the strongest peak
+    above 3 cycles per record). reference: the gains' scale (`estimate_gains`); default "best"
+    with a scene (which describes one pixel: give the pixel (y, x) that sees its footprint), else
+    "weighted". With a scene (not the modal model) its `noise.sigma` is set to the combined
+    series' 1 / sqrt(w) (a start when it is free).
+
+    The result is the combined series' FitResult with `data["pixels"]` the per-pixel table
+    (`TABLE_COLUMNS`), and in `diagnostics`: n_pixels, effective_snr_gain, combined_noise_sigma,
+    residual_log_likelihood (log R: the joint log-likelihood is the series' plus it),
+    gain_convention, reference_pixel, gain_iterations, gain_converged, seed_band_hz.
+    """
+    from vibinverse import api
+
+    start = perf_counter()
+    cube = frame_axes(cube)
+    if isinstance(scene, (str, Path)):
+        scene = api.load_scene(scene)  # a table: whether it is the modal model's is read from it
+    if scale is not None and displacement is None:
+        raise InputError("scale: metres per pixel apply to a displacement fit; give displacement='x' or 'y' too")
+    mask = select_pixels(cube, pixels)
+    matrix = PixelMatrix(cube, mask)
+    fixed = None
+    units = matrix.units
+    if displacement is not None:
+        fixed = gradient_gains(mean_frame(cube), displacement, 1.0 if scale is None else float(scale))[mask]
+        units = "m" if scale is not None else "pixel"
+    if reference is None:
+        reference = "weighted" if _is_modal(scene, fit_options) else "best"
+    gains, z, log_r = estimate_gains(matrix, gains=fixed, band=band, reference=reference, iterations=iterations)
+    source = str(cube.attrs.get("source") or cube.name or "cube")
+    series = combined_series(matrix, gains, z, units, f"{source}: {matrix.n} pixels combined")
+    sigma_z = 1.0 / math.sqrt(gains.information)
+    logger.info(
+        "%d pixels combined: noise %.4g (1 / sqrt(w)), SNR %.3g x the best pixel's; gains %s",
+        matrix.n,
+        sigma_z,
+        gains.snr_gain,
+        gains.convention,
+    )
+    seconds = perf_counter() - start
+    options = dict(fit_options)
+    if not _is_modal(scene, options):
+        options["overrides"] = [*options.get("overrides", ()), f"noise.sigma={sigma_z!r}"]
+    result = api.fit(series, scene, **options)
+    result.data["pixels"] = gains.table()
+    ref = gains.reference
+    result.diagnostics.update(
+        {
+            "n_pixels": matrix.n,
+            "effective_snr_gain": gains.snr_gain,
+            "combined_noise_sigma": sigma_z,
+            "residual_log_likelihood": log_r,
+            "gain_convention": gains.convention,
+            "reference_pixel": None if ref is None else [int(gains.y[ref]), int(gains.x[ref])],
+            "gain_iterations": gains.iterations,
+            "gain_converged": gains.converged,
+            "seed_band_hz": None if gains.band is None else list(gains.band),
+        }
+    )
+    result.timing = {"pixels_s": seconds, **result.timing}
+    return result
