@@ -313,14 +313,18 @@ def design(
     workers: int = 1,
     overrides: Sequence[str] = (),
     progress: bool = False,
+    pixels: int = 1,
 ) -> dict[str, Any]:
     """Design of observation over a sweep (`KEY=start:stop:num` or `KEY=a,b,c` each): sensitivity,
     line SNR and Cramer-Rao sds per configuration, ranked. Returns {"axes", "targets", "rows",
-    "best", "threshold", "seconds"} (`vibinverse.design.sweep.run_design`)."""
+    "best", "threshold", "seconds", "pixels"} (`vibinverse.design.sweep.run_design`); `pixels`: N equal
+    pixels fitted jointly (the multi-pixel Cramer-Rao bound of `vi.fit(cube, pixels=...)`)."""
     from vibinverse.design.sweep import run_design
 
     if workers < 1:
         raise InputError(f"--workers: {workers}; allowed range [1, inf)")
     table = _table(scene, overrides)
     with scene_errors():
-        return run_design(table, list(vary), list(targets) if targets else None, threshold, workers, progress=progress)
+        return run_design(
+            table, list(vary), list(targets) if targets else None, threshold, workers, progress=progress, pixels=pixels
+        )

@@ -382,6 +382,7 @@ def cmd_design(args: argparse.Namespace) -> dict[str, Any]:
             workers=args.workers,
             overrides=args.set or [],
             progress=not args.no_progress,
+            pixels=args.pixels,
         )
         written = write_design(result, out)
     rows = result["rows"]
@@ -671,6 +672,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     design.add_argument("--threshold", type=float, default=1e-4, help="detectability threshold on S (default 1e-4)")
     design.add_argument("--set", action="append", metavar="dotted.key=value", help="override a scene value")
+    design.add_argument(
+        "--pixels",
+        type=int,
+        default=1,
+        help="N equal pixels fitted jointly (fit CUBE --pixels): the multi-pixel Cramer-Rao bound (default 1)",
+    )
     design.add_argument("--workers", type=int, default=1, help="processes")
     design.add_argument("--no-progress", action="store_true")
     output_option(design, "design", ", ".join(DESIGN_FILES))

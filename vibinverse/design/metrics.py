@@ -30,7 +30,7 @@ from forward.scene import Noise, Scene
 from forward.scene_file import scene_from_table
 from forward.validation import Table
 from vibinverse.errors import SceneError
-from vibinverse.fisher import crlb_from_fisher, frame_fisher, spectrum_at
+from vibinverse.fisher import crlb_from_fisher, frame_fisher, multi_pixel_fisher, spectrum_at
 from vibinverse.io.series import Series
 from vibinverse.models import DeterministicModel, FrameModel, model_class_for
 from vibinverse.scene_keys import get_value, set_value
@@ -53,10 +53,12 @@ def check_targets(table: dict, targets: list[str]) -> None:
     DESIGNS[model_class_for(table).name].check_targets(table, targets)
 
 
-def evaluate(table: dict, targets: list[str], cache: dict) -> dict[str, Any]:
-    """Metrics of the configuration `table` (a complete scene table)."""
+def evaluate(table: dict, targets: list[str], cache: dict, pixels: int = 1) -> dict[str, Any]:
+    """Metrics of the configuration `table` (a complete scene table), for `pixels` equal pixels
+    fitted jointly (each seeing the footprint, with its own independent noise; the joint fit's
+    bound, `vibinverse.fisher.multi_pixel_fisher`)."""
     scene = scene_from_table(table)
-    return DESIGNS[model_class_for(table).name].metrics(table, scene, targets, cache)
+    return DESIGNS[model_class_for(table).name].metrics(table, scene, targets, cache, pixels)
 
 
 def _deterministic_targets(table: dict, targets: list[str]) -> None:
@@ -117,11 +119,14 @@ def _step(name: str, value: float, fs: float) -> float:
     return 1e-3 / fs if name == "sampling.start" else 1e-6 * max(abs(value), 1e-6)
 
 
-def _deterministic_metrics(table: dict, scene: Scene, targets: list[str], cache: dict) -> dict[str, Any]:
+def _deterministic_metrics(
+    table: dict, scene: Scene, targets: list[str], cache: dict, pixels: int = 1
+) -> dict[str, Any]:
     compiled = compile_scene(scene, seed=0, force=DESIGN_MODEL, shape_cache=cache)
     dc, ac = compiled.parts()
     t = compiled.t
-    var = noise_variance(scene.noise, dc + float(ac.mean()), dc + float(ac.max()))
+    # N equal pixels: the combined series has white noise of variance var / N (`multi_pixel_fisher`)
+    var = noise_variance(scene.noise, dc + float(ac.mean()), dc + float(ac.max())) / pixels
     if not var > 0:
         raise SceneError("noise.sigma: design needs sensor noise (sigma > 0, photons or an ADC) to bound parameters")
     row: dict[str, Any] = {
@@ -210,7 +215,7 @@ def _bounds(table: dict, targets: list[str], crlb: dict[str, float]) -> dict[str
     return out
 
 
-def _frame_metrics(table: dict, scene: Scene, targets: list[str], cache: dict) -> dict[str, Any]:
+def _frame_metrics(table: dict, scene: Scene, targets: list[str], cache: dict, pixels: int = 1) -> dict[str, Any]:
     t = scene.sampling.times()
     like = FrameModel(table, Series(t, np.zeros(t.size), "design"))
     base = like.base
@@ -220,7 +225,11 @@ def _frame_metrics(table: dict, scene: Scene, targets: list[str], cache: dict) -
     canonical = [_canonical(n, k) for n in targets]
     names = list(dict.fromkeys([*canonical, *nuisance]))
     values = {n: _value(base, n) for n in names}
-    comps = like.components(values)
+    sigma = values["noise.sigma"]
+    if pixels > 1 and not sigma > 0:
+        raise SceneError("noise.sigma: a design for several pixels needs each pixel's sensor noise (sigma > 0)")
+    # N equal pixels, each with its own white noise: the joint fit is the one-pixel model at sd sigma / sqrt(N)
+    comps = like.components({**values, "noise.sigma": sigma / np.sqrt(pixels)})
     if comps.r <= 0 and not comps.q.any():
         raise SceneError(
             "noise.sigma: design needs noise (sensor sigma > 0 or frame noise_rms > 0) to bound parameters"
@@ -237,7 +246,8 @@ def _frame_metrics(table: dict, scene: Scene, targets: list[str], cache: dict) -
         level = float(spectrum_at(comps, np.array([2 * np.pi * f * dt]))[0])
         amp = line_amplitude(t, comps.mean - comps.mean.mean(), float(f))
         row[f"snr {float(f):g} Hz"] = amp / np.sqrt(2 * level / t.size)
-    crlb = crlb_from_fisher(frame_fisher(like, values, names), names)
+    fisher = multi_pixel_fisher(lambda v, n: frame_fisher(like, v, n), values, names, [1.0] * pixels, [sigma] * pixels)
+    crlb = crlb_from_fisher(fisher, names)
     crlb = {orig: crlb[c] for orig, c in zip(targets, canonical)}
     return {**row, **_bounds(FrameModel.truth_table(table), targets, crlb)}
 
@@ -264,7 +274,7 @@ class Design:
     """How design evaluates one signal model's configurations."""
 
     check_targets: Callable[[dict, list[str]], None]
-    metrics: Callable[[dict, Scene, list[str], dict], dict[str, Any]]
+    metrics: Callable[[dict, Scene, list[str], dict, int], dict[str, Any]]  # (table, scene, targets, cache, pixels)
 
 
 # one entry per registered signal model (by its registry name)

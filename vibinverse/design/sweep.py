@@ -44,6 +44,9 @@ def default_axes(table: dict) -> list[Axis]:
     ]
 
 
+MAX_PIXELS = 1 << 24  # equal pixels combined (a 4096 x 4096 imager)
+
+
 def run_design(
     table: dict,
     vary: list[str],
@@ -51,14 +54,18 @@ def run_design(
     threshold: float = PAPER_THRESHOLD,
     workers: int = 1,
     progress: bool = False,
+    pixels: int = 1,
 ) -> dict[str, Any]:
-    """Evaluate the sweep; returns {"axes", "targets", "rows", "best", "threshold", "seconds"}.
+    """Evaluate the sweep; returns {"axes", "targets", "rows", "best", "threshold", "seconds",
+    "pixels"}. `pixels`: N equal pixels fitted jointly (the multi-pixel bound; 1: one pixel).
 
     Specification errors (unknown key, empty range, non-numeric value, unknown target) raise
     SceneError before any work; a configuration that is impossible (sun below the horizon, view
     outside (0, pi/2)) becomes a row with status naming why, not a failure of the sweep."""
     if not threshold > 0:
         raise SceneError(f"--threshold: {threshold:g}; allowed range (0, inf)")
+    if isinstance(pixels, bool) or not isinstance(pixels, int) or not 1 <= pixels <= MAX_PIXELS:
+        raise SceneError(f"--pixels: {pixels!r}; allowed range [1, {MAX_PIXELS}] (an integer)")
     axes = [parse_vary(v) for v in vary] if vary else default_axes(table)
     keys = [a.key for a in axes]
     if len(set(keys)) != len(keys):
@@ -70,9 +77,10 @@ def run_design(
             _validate(table, axis.key, value)
     configs = grid(axes)
     t0 = time.perf_counter()
-    rows = _evaluate_all(table, configs, targets, workers, progress)
+    rows = _evaluate_all(table, configs, targets, workers, progress, pixels)
     seconds = time.perf_counter() - t0
     return {
+        "pixels": pixels,
         "axes": axes,
         "targets": targets,
         "rows": rows,
@@ -92,18 +100,19 @@ def _validate(table: dict, key: str, value: Any) -> None:
         # an out-of-range value at one end is a row status, not a bad specification
 
 
-def _evaluate_all(table, configs, targets, workers, progress) -> list[dict[str, Any]]:
+def _evaluate_all(table, configs, targets, workers, progress, pixels=1) -> list[dict[str, Any]]:
     workers = min(workers, len(configs))
     if workers <= 1:
-        return _evaluate_chunk((table, configs, targets, progress))
+        return _evaluate_chunk((table, configs, targets, progress, pixels))
     import multiprocessing as mp
 
-    first = _evaluate_chunk((table, configs[:1], targets, False))  # one-time set-up (lobe tables) before the fork
+    # one-time set-up (lobe tables) before the fork
+    first = _evaluate_chunk((table, configs[:1], targets, False, pixels))
     rest = configs[1:]
     chunks = [rest[i::workers] for i in range(workers)]
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as pool:
         parts = list(
-            pool.map(_evaluate_chunk, [(table, c, targets, progress and i == 0) for i, c in enumerate(chunks)])
+            pool.map(_evaluate_chunk, [(table, c, targets, progress and i == 0, pixels) for i, c in enumerate(chunks)])
         )
     rows = [None] * len(rest)
     for w, part in enumerate(parts):
@@ -118,7 +127,7 @@ def _evaluate_chunk(job) -> list[dict[str, Any]]:
         return _evaluate_configs(*job)
 
 
-def _evaluate_configs(table, configs, targets, progress) -> list[dict[str, Any]]:
+def _evaluate_configs(table, configs, targets, progress, pixels=1) -> list[dict[str, Any]]:
     cache: dict = {}
     out = []
     iterator = configs
@@ -129,7 +138,7 @@ def _evaluate_configs(table, configs, targets, progress) -> list[dict[str, Any]]
     for config in iterator:
         row: dict[str, Any] = dict(config)
         try:
-            row.update(metrics.evaluate(configure(table, config), targets, cache))
+            row.update(metrics.evaluate(configure(table, config), targets, cache, pixels))
             row["status"] = "ok"
         except ForwardSceneError as exc:
             row["status"] = str(exc)

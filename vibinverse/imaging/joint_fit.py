@@ -432,6 +432,8 @@ def fit_pixels(
         options["overrides"] = [*options.get("overrides", ()), f"noise.sigma={sigma_z!r}"]
     result = api.fit(series, scene, **options)
     result.data["pixels"] = gains.table()
+    if isinstance(pixels, (str, Path)):  # "all", a mask file or DETECTION.nc:K: the report draws it
+        result.data["pixel_selection"] = str(pixels)
     ref = gains.reference
     result.diagnostics.update(
         {

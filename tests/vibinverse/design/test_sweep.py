@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.conftest import WAVELENGTH, K, table
+from tests.conftest import SCENES, WAVELENGTH, K, table
 from vibinverse.design.sweep import run_design
 
 
@@ -96,3 +96,33 @@ def test_default_sweeps_suit_the_scene():
 
     assert [a.key for a in default_axes(table("roof_elastic"))] == ["sensor.offset", "footprint.center"]
     assert [a.key for a in default_axes(table("ground_rayleigh"))] == ["sun.inclination", "footprint.width"]
+
+
+def test_design_for_several_pixels_is_the_joint_fits_bound():
+    """--pixels N: N equal pixels fitted jointly (`vi.fit(cube, pixels=...)`). Their combined series
+    is the one-pixel model at noise sd sigma / sqrt(N) (the sufficient statistic, DESIGN.md sec. 9):
+    for the deterministic elastic roof every bound falls as 1 / sqrt(N) exactly and the line SNR
+    grows as sqrt(N); for the frame the bounds equal one pixel's at sigma / sqrt(N) (the tilt
+    resonance, driven by base noise, gains at least N-fold information while sensor noise dominates
+    its peak, and saturates once the base noise does)."""
+    import vibinverse as vi
+
+    def row(scene, n, sigma=0.6, targets=None):
+        overrides = [f"noise.sigma={sigma!r}", "footprint.resolution=32"]
+        return vi.design(SCENES / scene, vary=["sun.inclination=1.0"], targets=targets, pixels=n, overrides=overrides)[
+            "rows"
+        ][0]
+
+    one, many = row("roof_elastic.toml", 1), row("roof_elastic.toml", 16)
+    bounds = [k for k in one if k.startswith("crlb ")]
+    assert bounds and all(many[k] == pytest.approx(one[k] / 4, rel=1e-9) for k in bounds)
+    assert many["snr 40 Hz"] == pytest.approx(4 * one["snr 40 Hz"], rel=1e-9)
+    targets = [K + "drive_frequency", K + "tilt_frequency"]
+    joint, alone = row("roof_frame.toml", 16, targets=targets), row("roof_frame.toml", 1, 0.15, targets)
+    for k in (f"crlb {t}" for t in targets):
+        assert joint[k] == pytest.approx(alone[k], rel=1e-9)
+    # never less than N-fold information (more where sensor noise dominates the resonance's peak)
+    single = row("roof_frame.toml", 1, targets=targets)[f"crlb {K}tilt_frequency"]
+    assert joint[f"crlb {K}tilt_frequency"] <= single / 4 * (1 + 1e-9)
+    with pytest.raises(vi.SceneError, match="--pixels"):
+        vi.design(SCENES / "roof_frame.toml", vary=["sun.inclination=1.0"], pixels=0)

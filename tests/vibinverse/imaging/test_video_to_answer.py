@@ -32,7 +32,7 @@ def roof_video(tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_the_roof_video_gives_its_lines_its_pixels_and_its_frequencies(roof_video):
+def test_the_roof_video_gives_its_lines_its_pixels_and_its_frequencies(roof_video, tmp_path):
     path, cube = roof_video
     video = vi.open_video(path)
     assert video.dtype == np.uint8 and video.attrs["bit_depth"] == 8  # counts, as the camera gave them
@@ -59,3 +59,11 @@ def test_the_roof_video_gives_its_lines_its_pixels_and_its_frequencies(roof_vide
     assert abs(f_drive - DRIVE) <= 3 * sd_drive and sd_drive < 0.02
     with pytest.raises(vi.InputError, match="cluster: 7"):
         found.cluster(7)
+
+    # the report shows the detection map the pixels came from and each pixel's gain
+    from vibinverse.report import write_report
+
+    found.to_netcdf(tmp_path / "detection.nc")
+    result.data["pixel_selection"] = f"{tmp_path / 'detection.nc'}:1"
+    page = write_report(result.to_netcdf(tmp_path / "result.nc"), tmp_path).read_text()
+    assert "<h2>Pixels</h2>" in page and "the detection map they were chosen from" in page
