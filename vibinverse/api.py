@@ -15,8 +15,6 @@ An observation that is a video or an image cube:
 
 from __future__ import annotations
 
-import copy
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -24,11 +22,11 @@ from typing import Any
 from forward.reduce import DEFAULT_RTOL
 from forward.sensor import Observation, observe
 from vibinverse.errors import InputError, scene_errors
+from vibinverse.fitting import SceneLike, SeriesLike, build_posterior, fit_series, scene_table
 from vibinverse.io.scenes import load_scene, scene_of
 from vibinverse.io.series import Series, load_series, validate
-from vibinverse.models import build_model
 from vibinverse.posterior import Posterior
-from vibinverse.priors import Prior, parse_free, parse_prior
+from vibinverse.priors import Prior
 from vibinverse.result import Detection, FitResult
 
 __all__ = [
@@ -45,9 +43,6 @@ __all__ = [
     "simulate",
     "simulate_cube",
 ]
-
-SceneLike = str | Path | Mapping[str, Any]
-SeriesLike = str | Path | Series
 
 
 def open_cube(
@@ -75,94 +70,10 @@ def _is_cube(data: Any) -> bool:
     return isinstance(data, xr.DataArray) and data.ndim == 3
 
 
-def _table(scene: SceneLike, overrides: Sequence[str] = ()) -> dict[str, Any]:
-    if isinstance(scene, Mapping):
-        from forward.validation import check_depth
-
-        with scene_errors():
-            check_depth(dict(scene), "scene")  # before copying: a deep or cyclic table would recurse
-        if overrides:
-            from forward.scene_file import apply_overrides
-
-            with scene_errors():
-                return apply_overrides(copy.deepcopy(dict(scene)), list(overrides))
-        return copy.deepcopy(dict(scene))
-    return load_scene(scene, overrides)
-
-
-def _series(series: SeriesLike) -> Series:
-    return series if isinstance(series, Series) else load_series(series)
-
-
 def series(time: Any, intensity: Any, *, scene: Mapping[str, Any] | None = None, source: str = "array") -> Series:
     """A validated series from arrays (NaN intensities are gaps); `scene`, when the data were
     simulated from one, gives the summary its true values."""
     return validate(time, intensity, source, None if scene is None else dict(scene))
-
-
-def _priors(free: Mapping[str, Prior | str] | None, table: dict[str, Any]) -> dict[str, Prior] | None:
-    """Free parameters: `free` (priors or prior strings), else the scene's [infer] table, else None
-    (the model's defaults)."""
-    out = parse_free([], table.get("infer"))
-    for name, prior in (free or {}).items():
-        out[name] = prior if isinstance(prior, Prior) else parse_prior(str(prior), name)
-    return out or None
-
-
-def _is_modal(scene: SceneLike | None, model: str | None) -> bool:
-    """No scene, a `{"modal": {...}}` table, or model="modal": the scene-less modal model."""
-    from vibinverse.models.modal import ModalModel
-
-    return scene is None or model == ModalModel.name or (isinstance(scene, Mapping) and "modal" in scene)
-
-
-def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]) -> tuple[dict[str, Any], Any]:
-    """The modal table to fit and the order search behind it (None when the table fixes the whole
-    order): `modes`, `lines`, `drift` and `noise` given in the table are kept, the others chosen
-    by `vibinverse.model_order.choose_order` (stepwise BIC), whose optimum seeds the fit."""
-    from vibinverse.model_order import SEARCHED, choose_order
-
-    table = {"modal": {}} if scene is None else _table(scene, overrides)
-    modal = table.get("modal")
-    if modal is None:
-        modal = table["modal"] = {}
-    if not isinstance(modal, dict):
-        raise InputError("modal: must be a table, e.g. {'modes': 2}")
-    with scene_errors():
-        from vibinverse.models.modal import ModalSpec
-
-        ModalSpec.from_table(table)  # one-line errors before any work
-        if all(k in modal for k in SEARCHED):
-            return table, None
-        order = choose_order(data, table)
-    chosen = order.table()["modal"]
-    table["modal"] = {**chosen, **{k: v for k, v in modal.items() if k in ("values",)}}
-    if "start" in modal:
-        table["modal"]["start"] = {**chosen["start"], **modal["start"]}
-    return table, order
-
-
-def _posterior(
-    series: SeriesLike,
-    scene: SceneLike | None,
-    free: Mapping[str, Prior | str] | None,
-    model: str | None,
-    overrides: Sequence[str],
-) -> tuple[Posterior, Any, bool]:
-    """(posterior, the order search or None, whether the model is the modal model)."""
-    from vibinverse.models.modal import ModalModel
-
-    data = _series(series)
-    order = None
-    modal = _is_modal(scene, model)
-    if modal:
-        table, order = _modal_table(data, scene, overrides)
-        model = ModalModel.name
-    else:
-        table = _table(scene, overrides)
-    with scene_errors():
-        sm = build_model(table, data, model)
-        return Posterior(sm, _priors(free, table)), order, modal
 
 
 def posterior(
@@ -178,7 +89,7 @@ def posterior(
     that describes the scene). Without a scene, or with a `{"modal": {...}}` table, the modal
     model (`vibinverse.models.modal`), its order chosen from the data (`vibinverse.model_order`)
     unless the table fixes it."""
-    return _posterior(series, scene, free, model, overrides)[0]
+    return build_posterior(series, scene, free, model, overrides)[0]
 
 
 def fit(
@@ -217,8 +128,6 @@ def fit(
     criterion table (each step: what was tried, its BIC, kept or not; [] when the table fixes the
     order) and `result.data["components"]` the fitted components.
     """
-    from vibinverse.pipeline import run
-
     if _is_cube(series) or pixels is not None:
         if not _is_cube(series):
             raise InputError("pixels: needs an image cube (vi.open_cube), not a single series")
@@ -229,28 +138,20 @@ def fit(
         return fit_pixels(series, "all" if pixels is None else pixels, scene, **cube_options, **options)
     if cube_options:
         raise InputError(f"{sorted(cube_options)[0]}: only for an image cube (with pixels=...)")
-    if workers < 1 or max_steps < 1:
-        raise InputError("workers and max_steps: must be >= 1")
-    if resume and chain is None:
-        raise InputError("resume: needs the chain (checkpoint) file of the run to continue")
-    post, order, modal = _posterior(series, scene, free, model, overrides)
-    with scene_errors(), tempfile.TemporaryDirectory(prefix="vibinverse-") as tmp:
-        result = run(
-            post,
-            method,
-            seed=seed,
-            backend=Path(chain) if chain else Path(tmp) / "chain.h5",  # no checkpoint asked for: a temporary one
-            resume=resume,
-            workers=workers,
-            max_steps=max_steps,
-            progress=progress,
-        )
-    if modal:
-        result.diagnostics["model_order"] = [] if order is None else order.criterion
-        result.data["components"] = post.model.components(result.point)
-        if order is not None:
-            result.timing["model_order_s"] = order.seconds
-    return result
+    return fit_series(
+        series,
+        scene,
+        method=method,
+        free=free,
+        model=model,
+        overrides=overrides,
+        seed=seed,
+        chain=chain,
+        resume=resume,
+        workers=workers,
+        max_steps=max_steps,
+        progress=progress,
+    )
 
 
 def detect(
@@ -289,7 +190,7 @@ def simulate(
     evaluates every subpixel at every sample (the dense reference)."""
     if rtol is not None and not (rtol > 0 and rtol < float("inf")):
         raise InputError(f"rtol: {rtol:g} is outside the allowed range (0, inf)")
-    table = _table(scene, overrides)
+    table = scene_table(scene, overrides)
     with scene_errors():
         return observe(scene_of(table), seed, rtol)
 
@@ -299,7 +200,7 @@ def simulate_cube(scene: SceneLike, nx: int, ny: int, *, seed: int | None = None
     own footprint through the forward model's fast path (`forward.imager.render_cube`)."""
     from forward.imager import render_cube
 
-    table = _table(scene, overrides)
+    table = scene_table(scene, overrides)
     with scene_errors():
         return render_cube(scene_of(table), nx, ny, seed=seed)
 
@@ -323,7 +224,7 @@ def design(
 
     if workers < 1:
         raise InputError(f"--workers: {workers}; allowed range [1, inf)")
-    table = _table(scene, overrides)
+    table = scene_table(scene, overrides)
     with scene_errors():
         return run_design(
             table, list(vary), list(targets) if targets else None, threshold, workers, progress=progress, pixels=pixels

@@ -381,7 +381,7 @@ def fit_pixels(
 ) -> FitResult:
     """Fit the selected pixels of `cube` (an xarray.DataArray (time, y, x), possibly dask-backed)
     jointly: per-pixel gains, offsets and noise levels (`estimate_gains`), then one single-series
-    fit (`vibinverse.api.fit(series, scene, **fit_options)`) of the combined series, which is
+    fit (`vibinverse.fitting.fit_series(series, scene, **fit_options)`, as `vi.fit`) of the combined series, which is
     sufficient for the shared parameters (module docstring).
 
     pixels: "all", a mask file (.npy, .png), "PATH.nc:K" (cluster K of a detection map), a boolean
@@ -398,12 +398,13 @@ def fit_pixels(
     residual_log_likelihood (log R: the joint log-likelihood is the series' plus it),
     gain_convention, reference_pixel, gain_iterations, gain_converged, seed_band_hz.
     """
-    from vibinverse import api
+    from vibinverse.fitting import fit_series
+    from vibinverse.io.scenes import load_scene
 
     start = perf_counter()
     cube = frame_axes(cube)
     if isinstance(scene, (str, Path)):
-        scene = api.load_scene(scene)  # a table: whether it is the modal model's is read from it
+        scene = load_scene(scene)  # a table: whether it is the modal model's is read from it
     if scale is not None and displacement is None:
         raise InputError("scale: metres per pixel apply to a displacement fit; give displacement='x' or 'y' too")
     mask = select_pixels(cube, pixels)
@@ -430,7 +431,7 @@ def fit_pixels(
     options = dict(fit_options)
     if not _is_modal(scene, options):
         options["overrides"] = [*options.get("overrides", ()), f"noise.sigma={sigma_z!r}"]
-    result = api.fit(series, scene, **options)
+    result = fit_series(series, scene, **options)
     result.data["pixels"] = gains.table()
     if isinstance(pixels, (str, Path)):  # "all", a mask file or DETECTION.nc:K: the report draws it
         result.data["pixel_selection"] = str(pixels)

@@ -1,0 +1,148 @@
+"""Fitting one series: the scene table and the posterior a fit needs (the modal model's order chosen
+from the data when no scene fixes it), then the pipeline. `vibinverse.api.fit` calls it for a series
+and `vibinverse.imaging.joint_fit` for the combined series of many pixels."""
+
+from __future__ import annotations
+
+import copy
+import tempfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from vibinverse.errors import InputError, scene_errors
+from vibinverse.io.scenes import load_scene
+from vibinverse.io.series import Series, load_series
+from vibinverse.models import build_model
+from vibinverse.posterior import Posterior
+from vibinverse.priors import Prior, parse_free, parse_prior
+from vibinverse.result import FitResult
+
+SceneLike = str | Path | Mapping[str, Any]
+SeriesLike = str | Path | Series
+
+
+def scene_table(scene: SceneLike, overrides: Sequence[str] = ()) -> dict[str, Any]:
+    if isinstance(scene, Mapping):
+        from forward.validation import check_depth
+
+        with scene_errors():
+            check_depth(dict(scene), "scene")  # before copying: a deep or cyclic table would recurse
+        if overrides:
+            from forward.scene_file import apply_overrides
+
+            with scene_errors():
+                return apply_overrides(copy.deepcopy(dict(scene)), list(overrides))
+        return copy.deepcopy(dict(scene))
+    return load_scene(scene, overrides)
+
+
+def as_series(series: SeriesLike) -> Series:
+    return series if isinstance(series, Series) else load_series(series)
+
+
+def _priors(free: Mapping[str, Prior | str] | None, table: dict[str, Any]) -> dict[str, Prior] | None:
+    """Free parameters: `free` (priors or prior strings), else the scene's [infer] table, else None
+    (the model's defaults)."""
+    out = parse_free([], table.get("infer"))
+    for name, prior in (free or {}).items():
+        out[name] = prior if isinstance(prior, Prior) else parse_prior(str(prior), name)
+    return out or None
+
+
+def _is_modal(scene: SceneLike | None, model: str | None) -> bool:
+    """No scene, a `{"modal": {...}}` table, or model="modal": the scene-less modal model."""
+    from vibinverse.models.modal import ModalModel
+
+    return scene is None or model == ModalModel.name or (isinstance(scene, Mapping) and "modal" in scene)
+
+
+def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]) -> tuple[dict[str, Any], Any]:
+    """The modal table to fit and the order search behind it (None when the table fixes the whole
+    order): `modes`, `lines`, `drift` and `noise` given in the table are kept, the others chosen
+    by `vibinverse.model_order.choose_order` (stepwise BIC), whose optimum seeds the fit."""
+    from vibinverse.model_order import SEARCHED, choose_order
+
+    table = {"modal": {}} if scene is None else scene_table(scene, overrides)
+    modal = table.get("modal")
+    if modal is None:
+        modal = table["modal"] = {}
+    if not isinstance(modal, dict):
+        raise InputError("modal: must be a table, e.g. {'modes': 2}")
+    with scene_errors():
+        from vibinverse.models.modal import ModalSpec
+
+        ModalSpec.from_table(table)  # one-line errors before any work
+        if all(k in modal for k in SEARCHED):
+            return table, None
+        order = choose_order(data, table)
+    chosen = order.table()["modal"]
+    table["modal"] = {**chosen, **{k: v for k, v in modal.items() if k in ("values",)}}
+    if "start" in modal:
+        table["modal"]["start"] = {**chosen["start"], **modal["start"]}
+    return table, order
+
+
+def build_posterior(
+    series: SeriesLike,
+    scene: SceneLike | None,
+    free: Mapping[str, Prior | str] | None,
+    model: str | None,
+    overrides: Sequence[str],
+) -> tuple[Posterior, Any, bool]:
+    """(posterior, the order search or None, whether the model is the modal model)."""
+    from vibinverse.models.modal import ModalModel
+
+    data = as_series(series)
+    order = None
+    modal = _is_modal(scene, model)
+    if modal:
+        table, order = _modal_table(data, scene, overrides)
+        model = ModalModel.name
+    else:
+        table = scene_table(scene, overrides)
+    with scene_errors():
+        sm = build_model(table, data, model)
+        return Posterior(sm, _priors(free, table)), order, modal
+
+
+def fit_series(
+    series: SeriesLike,
+    scene: SceneLike | None = None,
+    *,
+    method: str = "auto",
+    free: Mapping[str, Prior | str] | None = None,
+    model: str | None = None,
+    overrides: Sequence[str] = (),
+    seed: int = 0,
+    chain: str | Path | None = None,
+    resume: bool = False,
+    workers: int = 1,
+    max_steps: int = 20000,
+    progress: bool = False,
+) -> FitResult:
+    """`vibinverse.api.fit` of one series (its docstring has the options)."""
+    from vibinverse.pipeline import run
+
+    if workers < 1 or max_steps < 1:
+        raise InputError("workers and max_steps: must be >= 1")
+    if resume and chain is None:
+        raise InputError("resume: needs the chain (checkpoint) file of the run to continue")
+    post, order, modal = build_posterior(series, scene, free, model, overrides)
+    with scene_errors(), tempfile.TemporaryDirectory(prefix="vibinverse-") as tmp:
+        result = run(
+            post,
+            method,
+            seed=seed,
+            backend=Path(chain) if chain else Path(tmp) / "chain.h5",  # no checkpoint asked for: a temporary one
+            resume=resume,
+            workers=workers,
+            max_steps=max_steps,
+            progress=progress,
+        )
+    if modal:
+        result.diagnostics["model_order"] = [] if order is None else order.criterion
+        result.data["components"] = post.model.components(result.point)
+        if order is not None:
+            result.timing["model_order_s"] = order.seconds
+    return result
