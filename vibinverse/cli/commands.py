@@ -630,7 +630,12 @@ def build_parser() -> argparse.ArgumentParser:
         "-> casadi -> emcee, each seeding the next); map is a derivative-free MAP (scipy)",
     )
     fit.add_argument("--seed", type=int, default=0)
-    fit.add_argument("--workers", type=int, default=1, help="processes for the sampler")
+    fit.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="the sampler's workers: threads where the likelihood releases the GIL (frame, modal), else processes",
+    )
     fit.add_argument("--max-steps", type=int, default=20000, help="cap on MCMC steps")
     fit.add_argument("--chain", metavar="FILE", help=f"HDF5 checkpoint of the sampler (default: DIR/{CHAIN})")
     fit.add_argument("--resume", action="store_true", help="continue an interrupted MCMC run from its checkpoint")
