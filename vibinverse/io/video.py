@@ -17,6 +17,7 @@ from __future__ import annotations
 import functools
 import importlib
 import logging
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -47,7 +48,7 @@ def first_line(exc: BaseException) -> str:
 
 
 # ----------------------------------------------------------------------------------- the base class
-class FrameSource:
+class FrameSource(ABC):
     """A lazily read stack of frames, shape (time, y, x) or (time, y, x, channel).
 
     Subclasses implement `read(lo, hi, rest)`: frames lo..hi-1 with the index `rest` (slices or
@@ -62,8 +63,9 @@ class FrameSource:
     def ndim(self) -> int:
         return len(self.shape)
 
+    @abstractmethod
     def read(self, lo: int, hi: int, rest: tuple) -> np.ndarray:
-        raise NotImplementedError
+        """Frames lo..hi-1 with `rest` applied to the other axes."""
 
     def chunk_sizes(self, n: int) -> tuple[int, ...]:
         """The default chunks along time for about `n` frames each (here: regular)."""
