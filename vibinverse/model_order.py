@@ -6,10 +6,10 @@ Greedy forward selection by the Bayesian information criterion
     BIC = -2 ln L_max + k ln n      (k free parameters, n observed samples).
 
 It starts from white noise plus a level. At each step it looks at the spectrum of the current
-model's standardized one-step residuals (innovations: white where the model describes the data;
-on irregular stamps the spectrum treats them as spaced by the median step, which only places the
-candidates) and proposes, at its strongest peak, a resonance (the peak of the smoothed residual
-spectrum) and a line (its highest bin), plus each nuisance term not yet in the model: a random-walk
+model's standardized one-step residuals (innovations: white where the model describes the data; on
+irregular stamps a Lomb-Scargle periodogram at the stamps themselves) and proposes, at its strongest
+peak, a resonance (the peak of the smoothed residual spectrum) and a line (its highest bin), plus
+each nuisance term not yet in the model: a random-walk
 drift, AR(1) noise, 1/f noise. A nuisance term is first screened on a grid of starting values (one
 likelihood each) and dropped when no point of the grid gains. Each candidate is then fitted with
 only its new parameters, the level and the white noise free (the rest held at the current optimum:
@@ -223,11 +223,11 @@ def candidates(fit: OrderFit, series: Series, search: dict[str, bool], caps: tup
     span = max(model.span, dt)
     lo, nyq = MIN_CYCLES / span, 0.5 / dt
     e = model.residuals(values)
-    freqs, power = spectrum(e, dt)
+    freqs, power = spectrum(e, dt, model.t)
     band = (freqs >= lo) & (freqs < 0.999 * nyq)
     out: list[Candidate] = []
     v = innovations(fit)
-    vf, vp = spectrum(v, dt)
+    vf, vp = spectrum(v, dt, model.t)
     floor = float(np.median(vp[band])) / math.log(2.0)
     sigma = values["noise.sigma"]
     if search["modes"] and spec.modes < caps[0] and band.any():

@@ -39,6 +39,12 @@ def _noted(notes: list[str], prefix: str) -> str | None:
     return next((n[len(prefix) :].strip() for n in notes if n.startswith(prefix)), None)
 
 
+def evenly_spaced(t: np.ndarray) -> bool:
+    """Whether stamps `t` lie on one regular grid to UNIFORM_RTOL of its step."""
+    step = (t[-1] - t[0]) / (t.size - 1)
+    return bool(np.max(np.abs(t - (t[0] + np.arange(t.size) * step))) <= UNIFORM_RTOL * step)
+
+
 @dataclass(frozen=True)
 class Series:
     time: NDArray[np.float64]
@@ -63,9 +69,7 @@ class Series:
     def uniform(self) -> bool:
         """Whether the stamps lie on one regular grid to UNIFORM_RTOL of its step: camera stamps
         written with 9 significant digits (1e-8 s at 20 s) are uniform, jittered frames are not."""
-        t = self.time
-        step = (t[-1] - t[0]) / (t.size - 1)
-        return bool(np.max(np.abs(t - (t[0] + np.arange(t.size) * step))) <= UNIFORM_RTOL * step)
+        return evenly_spaced(self.time)
 
     @property
     def fs(self) -> float:

@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 
 from vibinverse.errors import SceneError
-from vibinverse.io.series import MIN_CYCLES, Series
+from vibinverse.io.series import MIN_CYCLES, Series, evenly_spaced
 from vibinverse.kalman import njit, unique_steps
 from vibinverse.models.base import LineTest, SignalModel, intensity_units, parameter_units, register_model
 from vibinverse.priors import Prior
@@ -495,11 +495,27 @@ def _root(cov: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ spectra (starts, the order search)
 
 
-def spectrum(y: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+def spectrum(y: np.ndarray, dt: float, t: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(frequencies, power) on (0, Nyquist] of the de-meaned series, gaps filled with 0, unpadded:
     power = |sum y e^{-i w t}|^2 / N_valid, whose mean is sigma^2 for white noise of sd sigma and
-    whose sum over the one-sided bins is N / 2 x the variance (Parseval)."""
+    whose sum over the one-sided bins is N / 2 x the variance (Parseval).
+
+    With irregular stamps `t` (jitter, dropped frames) the same power at the stamps themselves: the
+    floating-mean Lomb-Scargle periodogram of the valid samples (nifty-ls, "psd" normalization, which
+    is the formula above on a uniform grid), on the grid k / (n dt) up to 1 / (2 dt), dt the median
+    step. Treating the samples as evenly spaced would move every peak by the fraction of frames
+    dropped (5 % at 10 % dropped), more than a line's width."""
     good = np.isfinite(y)
+    if t is not None and t.size > 2 and not evenly_spaced(t):
+        import nifty_ls
+
+        tt = np.ascontiguousarray(t[good], dtype=np.float64)
+        n = round((t[-1] - t[0]) / dt) + 1
+        df = 1.0 / (n * dt)
+        nf = max(n // 2, 2)
+        yy = np.ascontiguousarray(y[good] - np.mean(y[good]), dtype=np.float64)
+        res = nifty_ls.lombscargle(tt, yy, fmin=df, fmax=nf * df, Nf=nf, normalization="psd")
+        return np.asarray(res.freq(), dtype=float), np.asarray(res.power, dtype=float)
     r = np.where(good, y - np.nanmean(y), 0.0)
     power = np.abs(np.fft.rfft(r)) ** 2 / max(int(good.sum()), 1)
     freqs = np.fft.rfftfreq(r.size, dt)
@@ -846,7 +862,7 @@ class ModalModel(SignalModel):
         neighbourhood), the modes at the others (half-power width and band power); a second start
         with the roles of the sharpest peaks exchanged."""
         s = self.spec
-        freqs, power = spectrum(self.y, self.steps[0] if self.steps.size == 1 else self.dt)
+        freqs, power = spectrum(self.y, self.steps[0] if self.steps.size == 1 else self.dt, self.t)
         nyq, lo = 0.5 * self.series.fs, MIN_CYCLES / max(self.span, self.dt)
         n = self.n_obs
         floor = (
