@@ -19,7 +19,9 @@ if TYPE_CHECKING:
 logger = logging.getLogger("vibinverse")
 
 PIXELS = "pixels.csv"  # the per-pixel table in -o DIR
-CUBE_OPTIONS = ("displacement", "scale", "band", "reference", "fps", "channel", "variable")  # apply with --pixels only
+CUBE_OPTIONS = (
+    "displacement", "scale", "band", "reference", "fps", "channel", "variable", "sources"
+)  # fmt: skip  # apply with --pixels only
 SERIES_OPTIONS = ("time_column", "value_column", "fs")  # apply to a series table only
 
 
@@ -65,6 +67,16 @@ def add_cube_options(parser: argparse.ArgumentParser) -> None:
         help="with --pixels: the colour channel of a colour video (default: luminance)",
     )
     parser.add_argument("--variable", metavar="NAME", help="with --pixels: the cube's variable in a netCDF/zarr file")
+    parser.add_argument(
+        "--sources",
+        type=int,
+        metavar="K",
+        help="with --pixels: K >= 2 sources (tilt modes, drive lines) seen by the pixels in different mixtures, "
+        "fitted jointly: per source a gain column (gain_0, gain_1, ... in "
+        f"{PIXELS}) from its own band (the K strongest separated peaks, or the lines of a detection.nc:K "
+        "cluster), and one multi-output fit of the K combined series, each source a mode or a line "
+        "(default 1: one shared signal); K from 1 to the number of selected pixels",
+    )
 
 
 def _band(text: str) -> tuple[float, float]:
@@ -126,6 +138,7 @@ def fit_cube(args: argparse.Namespace, table: dict[str, Any], options: dict[str,
         scale=args.scale,
         band=args.band,
         reference=args.reference,
+        sources=1 if args.sources is None else args.sources,
         **options,
     )
     return result
@@ -137,12 +150,22 @@ def write_pixels_csv(path: Path, result: FitResult) -> None:
 
     table = result.data["pixels"]
     d = result.diagnostics
+    columns = list(table) if "gain_0" in table else list(TABLE_COLUMNS)  # several sources: gain_0, gain_1, ...
     with open(path, "w", newline="") as fh:
         fh.write(f"# gains: {d.get('gain_convention')}\n")
         if d.get("reference_pixel") is not None:
-            fh.write(f"# reference pixel (y, x): {tuple(d['reference_pixel'])}\n")
-        fh.write("# sigma: white-noise sd per pixel; snr_share: g^2 / sigma^2 / sum of it (sums to 1)\n")
+            ref = d["reference_pixel"]
+            where = ", ".join(str(tuple(p)) for p in ref) if ref and isinstance(ref[0], list) else str(tuple(ref))
+            fh.write(f"# reference pixel (y, x): {where}\n")
+        if "gain_0" in table:
+            kinds = d.get("source_kinds") or []
+            bands = d.get("source_bands_hz") or []
+            for j, (kind, band) in enumerate(zip(kinds, bands)):
+                fh.write(f"# source {j}: {kind}, gains from the band {band[0]:.6g}-{band[1]:.6g} Hz\n")
+            fh.write("# sigma: white-noise sd per pixel; snr_share_j: G_ij^2 / sigma_i^2 / its sum over pixels\n")
+        else:
+            fh.write("# sigma: white-noise sd per pixel; snr_share: g^2 / sigma^2 / sum of it (sums to 1)\n")
         writer = csv.writer(fh)
-        writer.writerow(TABLE_COLUMNS)
-        for row in zip(*(table[c] for c in TABLE_COLUMNS)):
+        writer.writerow(columns)
+        for row in zip(*(table[c] for c in columns)):
             writer.writerow([repr(v) if isinstance(v, float) else v for v in row])

@@ -28,10 +28,39 @@ exactly: p_z is the single-series likelihood of z with white observation noise o
 and R does not depend on theta. z is a sufficient statistic for theta; its noise is 1/sqrt(w), the
 noise of one pixel over sqrt(N) for N equal pixels, and pixels of opposite signs add.
 
-With r modes seen in different mixtures (pixel i sees sum_j G_ij s_j), the same algebra gives the
-r-dimensional statistic Z = (G^T S^-1 G)^-1 G^T S^-1 (y - c) with noise covariance
-(G^T S^-1 G)^-1 (`combine_modes`); the single-series models take one series, so fitting it is not
-done here.
+Several sources (`fit_pixels(..., sources=r)`, r >= 2): pixel i sees r sources (tilt modes, a
+drive line: each its own pixel pattern) in its own mixture,
+
+    y_i(t) = c_i + sum_j G_ij s_j(t) + e_i(t),    y(t) - c = G s(t) + e(t),  e ~ N(0, S = diag sigma^2).
+
+With M = G^T S^-1 G (r x r, invertible when the patterns are independent), C = M^-1 and
+Z(t) = C G^T S^-1 (y(t) - c) (`combine_modes`), the cross term (y - c - G Z)^T S^-1 G (Z - s) =
+(G^T S^-1 (y - c) - M Z)^T (Z - s) vanishes, so at each t
+
+    (y - c - G s)^T S^-1 (y - c - G s) = (Z - s)^T M (Z - s) + (y - c - G Z)^T S^-1 (y - c - G Z),
+
+p(Y | s) = prod_t N(Z(t); s(t), C) R, and whatever the law of s given theta,
+
+    p(Y | theta, G, c, sigma) = p_Z(Z | theta; white noise of covariance C) x R(Y; G, c, sigma),
+    log R = -1/2 sum_t (y - c - G Z)^T S^-1 (y - c - G Z)
+            - T/2 [sum_i log(2 pi sigma_i^2) - log det(2 pi C)]
+
+(`residual_log_likelihood` with a gain matrix): Z (time x r) is sufficient for theta, and R is
+free of it. p_Z is the multi-output model's likelihood (`vibinverse.models.multi_output`: output j
+is source j, a mode or a line, in white noise of covariance C). The estimates (`estimate_sources`):
+per source j the gains are the leading eigenvector of the whitened cross-spectral matrix summed over
+source j's band (`band_gains`; the bands the strongest separated excesses of the whitened trace
+spectrum, `vibinverse.imaging.pixels.choose_bands`, or given, or around the lines of a detection
+map's cluster), each column scaled as one gain vector (`scale_gains`; a reference pixel must see
+every source); the offsets are the pixels' means (Z's level 0: with r sources the levels of Z are
+not identifiable apart from the offsets). The residual about c_i + G_i Z has variance
+v_i = sigma_i^2 - G_i C G_i^T (the hat matrix's diagonal: Z's own noise is in it), so
+sigma_i^2 = v_i + G_i C G_i^T with C = (G^T S^-1 G)^-1 itself a function of sigma: the fixed point
+M = sum_i G_i^T G_i / (v_i + G_i M^-1 G_i^T), iterated from M = sum_i G_i^T G_i / v_i down to its
+largest root (`solve_sigma_modes`; for r = 1 it is the root of `solve_sigma`). The two alternate as
+for one source. Whether a source is a mode or a line is decided per output, by the larger maximum
+likelihood of a one-mode or a one-line modal model of Z_j alone (`source_kinds`; a table's
+counts of modes and lines give the number of lines, taken from the most line-like outputs).
 
 Per-pixel parameters (`estimate_gains`). The gains are the leading eigenvector of the
 cross-spectral matrix summed over the band of the strongest line or resonance, whitened by the
@@ -63,6 +92,7 @@ spread of the offsets against the signal's period).
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 from collections.abc import Mapping
@@ -112,7 +142,15 @@ def combine(y: np.ndarray, gain: np.ndarray, offset: np.ndarray, sigma: np.ndarr
 
 def residual_log_likelihood(y: np.ndarray, gain: np.ndarray, offset: np.ndarray, sigma: np.ndarray) -> float:
     """log R, the factor of the joint likelihood that does not depend on the shared signal's
-    parameters (module docstring): log p(Y | theta) = log p_z(z | theta; noise 1/w) + log R."""
+    parameters (module docstring): log p(Y | theta) = log p_z(z | theta; noise 1/w) + log R; with
+    a gain matrix (pixel, r) that of r sources, log p(Y | theta) = log p_Z(Z | theta; C) + log R."""
+    if np.ndim(gain) == 2:
+        gains = np.asarray(gain, dtype=float)
+        _, c, s = _params(y, gains[:, 0], offset, sigma)
+        z, cov = combine_modes(y, gains, c, s)
+        r = (np.asarray(y, dtype=float) - c - z @ gains.T) / s
+        _, logdet = np.linalg.slogdet(2 * np.pi * cov)
+        return float(-0.5 * np.sum(r**2) - 0.5 * r.shape[0] * (np.sum(np.log(2 * np.pi * s**2)) - logdet))
     g, c, s = _params(y, gain, offset, sigma)
     z, w = combine(y, g, c, s)
     r = (np.asarray(y, dtype=float) - c - np.outer(z, g)) / s
@@ -222,6 +260,44 @@ def solve_sigma(v: np.ndarray, gain: np.ndarray) -> np.ndarray | None:
         return None
     w = math.exp(brentq(h, lo, hi, xtol=1e-14, rtol=1e-14))
     return np.sqrt(np.maximum(v, 0.0) + g2 / w)
+
+
+def solve_sigma_modes(
+    v: np.ndarray, gains: np.ndarray, *, tol: float = 1e-12, max_iter: int = 2000
+) -> np.ndarray | None:
+    """Noise levels sigma_i = sqrt(v_i + G_i C G_i^T) from the residual variances v_i about
+    c_i + G_i Z (pixel, r gains), C = M^-1 at the largest root of M = sum_i G_i^T G_i / (v_i +
+    G_i M^-1 G_i^T), iterated from sum_i G_i^T G_i / v_i (module docstring; the iteration decreases
+    monotonically to that root). None when fewer than r + 1 pixels have a gain and residual noise,
+    or the root is singular."""
+    g = np.asarray(gains, dtype=float)
+    v = np.asarray(v, dtype=float)
+    r = g.shape[1]
+    use = np.any(g != 0, axis=1) & (v > 0)
+    if use.sum() < r + 1:
+        return None
+    gu, vu = g[use], v[use]
+    info = (gu.T / vu) @ gu
+    for _ in range(max_iter):
+        try:
+            cov = np.linalg.inv(info)
+        except np.linalg.LinAlgError:
+            return None
+        lev = np.einsum("ij,jk,ik->i", gu, cov, gu)
+        new = (gu.T / (vu + lev)) @ gu
+        done = np.max(np.abs(new - info)) <= tol * np.max(np.abs(info))
+        info = new
+        if done:
+            break
+    else:
+        logger.debug("noise levels: the fixed point did not settle in %d iterations", max_iter)
+    try:
+        cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(cov)):
+        return None
+    return np.sqrt(np.maximum(v, 0.0) + np.einsum("ij,jk,ik->i", g, cov, g))
 
 
 def _direction(gain: np.ndarray, sigma: np.ndarray) -> np.ndarray:
@@ -349,6 +425,227 @@ def estimate_gains(
     return out, z, log_r
 
 
+# ------------------------------------------------------------------ several sources
+
+
+@dataclass(frozen=True)
+class SourceGains:
+    """Per-pixel observation parameters of a joint fit of r sources: position (`y`, `x`), `gains`
+    (pixel, r; with their signs, each column scaled by `convention`), `offset` (the pixel's mean),
+    `sigma`; `references` the pixel whose gain is +1 per column (None: the SNR-weighted
+    convention), `bands` (Hz) where each column was estimated, the refinement's `iterations` and
+    whether it `converged`."""
+
+    y: np.ndarray
+    x: np.ndarray
+    gains: np.ndarray
+    offset: np.ndarray
+    sigma: np.ndarray
+    references: list[int] | None
+    convention: str
+    bands: list[tuple[float, float]]
+    iterations: int = 0
+    converged: bool = True
+
+    @property
+    def n_sources(self) -> int:
+        return int(self.gains.shape[1])
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """C = (G^T S^-1 G)^-1: the noise covariance of the statistic Z."""
+        return np.linalg.inv((self.gains.T / self.sigma**2) @ self.gains)
+
+    @property
+    def share(self) -> np.ndarray:
+        """Each pixel's share of each source's SNR^2 as if alone, G_ij^2 / sigma_i^2 over its sum
+        (pixel, r; each column sums to 1)."""
+        p = self.gains**2 / self.sigma[:, None] ** 2
+        return p / p.sum(axis=0)
+
+    @property
+    def snr_gain(self) -> list[float]:
+        """Per source, the combined SNR over the best single pixel's: 1 / sqrt(max share) (sqrt(N)
+        for N equal pixels; the other sources' leakage not counted)."""
+        return [float(1.0 / math.sqrt(v)) for v in self.share.max(axis=0)]
+
+    def columns(self) -> list[str]:
+        """The per-pixel table's columns: y, x, gain_j, sign_j, offset, sigma, snr_share_j."""
+        r = range(self.n_sources)
+        return [
+            "y",
+            "x",
+            *(f"gain_{j}" for j in r),
+            *(f"sign_{j}" for j in r),
+            "offset",
+            "sigma",
+            *(f"snr_share_{j}" for j in r),
+        ]
+
+    def table(self) -> dict[str, list[Any]]:
+        """The per-pixel table, column by column (`columns`), JSON-able."""
+        out: dict[str, list[Any]] = {"y": [int(v) for v in self.y], "x": [int(v) for v in self.x]}
+        share = self.share
+        for j in range(self.n_sources):
+            out[f"gain_{j}"] = [float(v) for v in self.gains[:, j]]
+        for j in range(self.n_sources):
+            out[f"sign_{j}"] = [int(v) for v in np.sign(self.gains[:, j])]
+        out["offset"] = [float(v) for v in self.offset]
+        out["sigma"] = [float(v) for v in self.sigma]
+        for j in range(self.n_sources):
+            out[f"snr_share_{j}"] = [float(v) for v in share[:, j]]
+        return out
+
+
+def _combine_modes_pass(
+    matrix: PixelMatrix, gains: np.ndarray, offset: np.ndarray, sigma: np.ndarray, valid: np.ndarray
+):
+    """(Z (time, r) with NaN rows at invalid frames, C, log R) in one pass over the pixels (module
+    docstring: sum_i (y_i - c_i - G_i Z)^2 / sigma_i^2 = q - Z^T M Z, q = sum_i (y_i - c_i)^2 / sigma_i^2)."""
+    a = gains / sigma[:, None] ** 2
+    info = gains.T @ a
+    try:
+        cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        raise InputError("gains: the sources' pixel patterns are not independent (G^T S^-1 G is singular)") from None
+    proj = np.zeros((int(valid.sum()), gains.shape[1]))
+    q = np.zeros(proj.shape[0])
+    for sl, block in matrix.blocks():
+        d = block[valid] - offset[sl]
+        proj += d @ a[sl]
+        q += (d**2) @ (1.0 / sigma[sl] ** 2)
+    z = proj @ cov
+    _, logdet = np.linalg.slogdet(2 * np.pi * cov)
+    log_r = -0.5 * float(np.sum(q - np.einsum("ti,ti->t", z, proj))) - 0.5 * z.shape[0] * (
+        float(np.sum(np.log(2 * np.pi * sigma**2))) - logdet
+    )
+    out = np.full((valid.size, gains.shape[1]), np.nan)
+    out[valid] = z
+    return out, cov, log_r
+
+
+def _residual_modes_pass(matrix: PixelMatrix, z: np.ndarray, valid: np.ndarray, gains: np.ndarray, offset: np.ndarray):
+    """Each pixel's residual variance about c_i + G_i Z over the valid frames (ddof 1)."""
+    zv = z[valid]
+    v = np.empty(matrix.n)
+    for sl, block in matrix.blocks():
+        r = block[valid] - offset[sl] - zv @ gains[sl].T
+        v[sl] = np.sum((r - r.mean(axis=0)) ** 2, axis=0) / (zv.shape[0] - 1)
+    return v
+
+
+def estimate_sources(
+    matrix: PixelMatrix,
+    count: int,
+    *,
+    bands: list[tuple[float, float]] | None = None,
+    centres: list[float] | None = None,
+    reference: tuple[int, int] | str = "weighted",
+    iterations: int = ITERATIONS,
+) -> tuple[SourceGains, np.ndarray, float]:
+    """(per-pixel parameters, the statistic Z (time, count; NaN rows at frames a pixel misses),
+    log R) of `count` >= 2 sources seen in different mixtures (module docstring): per source the
+    gains from its band's whitened cross-spectral matrix (`choose_bands`: `bands` in Hz, else
+    around `centres` in Hz, else the strongest separated excesses), the noise levels from the
+    residuals about c_i + G_i Z (`solve_sigma_modes`), in turn until every column's whitened
+    direction settles. `reference` scales each column as `estimate_gains` does."""
+    from vibinverse.imaging.pixels import choose_bands, seed_bands
+
+    if iterations < 1:
+        raise InputError(f"iterations: {iterations}; allowed range [1, inf)")
+    if isinstance(reference, str) and reference not in REFERENCES:
+        raise InputError(f"reference: {reference!r}; allowed: {', '.join(map(repr, REFERENCES))} or a pixel (y, x)")
+    levels = noise_levels(matrix)
+    valid, mean, floor = levels.valid, levels.mean, levels.sigma
+    ref = None
+    if not isinstance(reference, str):
+        hit = np.flatnonzero((matrix.y == reference[0]) & (matrix.x == reference[1]))
+        if hit.size == 0:
+            raise InputError(f"reference: pixel {tuple(reference)} is not among the selected pixels")
+        ref = int(hit[0])
+    seeds = seed_bands(matrix, levels, choose_bands(levels, matrix.n, count, bands=bands, centres=centres))
+    convention = (
+        "each source's gains relative to their SNR-weighted mean |gain| (sum of share x |gain| = 1)"
+        if reference == "weighted"
+        else "each source's gains relative to a reference pixel's (gain +1)"
+    )
+
+    def observation(sigma: np.ndarray) -> tuple[np.ndarray, list[int] | None]:
+        cols, refs = [], []
+        for seed in seeds:
+            b = band_gains(seed.coef, sigma)
+            k = int(np.argmax(b**2 / sigma**2)) if reference == "best" else ref
+            cols.append(scale_gains(b, sigma, mean, k)[0])
+            refs.append(k)
+        return np.stack(cols, axis=1), (None if reference == "weighted" else refs)
+
+    def directions(g: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+        u = g / sigma[:, None]
+        return u / np.linalg.norm(u, axis=0)
+
+    sigma = floor.copy()
+    gains, refs = observation(sigma)
+    offset = mean.copy()
+    converged, done = False, 0
+    while not converged and done < iterations:
+        before = directions(gains, sigma)
+        z, _, _ = _combine_modes_pass(matrix, gains, offset, sigma, valid)
+        solved = solve_sigma_modes(_residual_modes_pass(matrix, z, valid, gains, offset), gains)
+        sigma = solved if solved is not None else floor
+        gains, refs = observation(sigma)
+        after = directions(gains, sigma)
+        change = np.minimum(np.max(np.abs(after - before), axis=0), np.max(np.abs(after + before), axis=0))
+        converged = bool(np.all(change <= TOLERANCE))
+        done += 1
+    z, _, log_r = _combine_modes_pass(matrix, gains, offset, sigma, valid)
+    out = SourceGains(
+        matrix.y, matrix.x, gains, offset, sigma, refs, convention, [sd.band for sd in seeds], done, converged
+    )
+    return out, z, log_r
+
+
+def source_kinds(series: Any, lines: int | None = None) -> tuple[list[str], dict[str, float]]:
+    """(kind per output, a start of the multi-output model) of a `MultiSeries`: each output fitted
+    alone by a one-mode and a one-line modal model (`vibinverse.model_order.fit_order`, maximum
+    likelihood from the modal model's spectral starts); an output is a line when the line's
+    log-likelihood is the larger, or, with `lines` given, the `lines` outputs where it is larger by
+    the most are. The start is each output's optimum of its kind."""
+    from vibinverse.model_order import fit_order
+    from vibinverse.models.modal import ModalModel, ModalSpec
+
+    fits = []
+    for j in range(series.n_outputs):
+        out = series.output(j)
+        pair = {}
+        for kind, spec in (("mode", ModalSpec(modes=1)), ("line", ModalSpec(lines=1))):
+            model = ModalModel({"modal": spec.table()}, out)
+            pair[kind] = fit_order(out, spec, model.guesses(model.default_priors()))
+        fits.append(pair)
+    gain = [f["line"].log_likelihood - f["mode"].log_likelihood for f in fits]
+    if lines is None:
+        kinds = ["line" if g > 0 else "mode" for g in gain]
+    else:
+        top = set(np.argsort(gain)[::-1][:lines].tolist())
+        kinds = ["line" if j in top else "mode" for j in range(len(gain))]
+    start: dict[str, float] = {}
+    counts = {"mode": 0, "line": 0}
+    for j, (kind, pair) in enumerate(zip(kinds, fits)):
+        i = counts[kind]
+        counts[kind] += 1
+        base = "modes" if kind == "mode" else "lines"
+        for name, value in pair[kind].values.items():
+            if name == "level":
+                start[f"outputs[{j}].level"] = float(value)
+            elif name.startswith(base + "[0]."):
+                start[f"{base}[{i}].{name.split('.', 1)[1]}"] = float(value)
+    logger.info(
+        "sources: %s (log-likelihood of a line over a mode per output: %s)",
+        ", ".join(kinds),
+        ", ".join(f"{g:.1f}" for g in gain),
+    )
+    return kinds, start
+
+
 # ------------------------------------------------------------------ the joint fit
 
 
@@ -377,6 +674,8 @@ def fit_pixels(
     band: tuple[float, float] | None = None,
     reference: tuple[int, int] | str | None = None,
     iterations: int = ITERATIONS,
+    sources: int = 1,
+    bands: list[tuple[float, float]] | None = None,
     **fit_options: Any,
 ) -> FitResult:
     """Fit the selected pixels of `cube` (an xarray.DataArray (time, y, x), possibly dask-backed)
@@ -397,6 +696,17 @@ def fit_pixels(
     (`TABLE_COLUMNS`), and in `diagnostics`: n_pixels, effective_snr_gain, combined_noise_sigma,
     residual_log_likelihood (log R: the joint log-likelihood is the series' plus it),
     gain_convention, reference_pixel, gain_iterations, gain_converged, seed_band_hz.
+
+    sources: r >= 2 fits r sources seen in different mixtures (module docstring): the statistic Z
+    (`estimate_sources`; `bands`, one (fmin, fmax) in Hz per source, else around the lines of a
+    `PATH.nc:K` cluster, else the strongest separated bands) fitted by the multi-output model
+    (`vibinverse.models.multi_output`), each source a mode or a line (`source_kinds`; a
+    `{"modal": {"modes": M, "lines": L}}` table with M + L = r fixes how many are lines, a
+    `{"multi_output": {"sources": [...]}}` table each kind). Its result is output 0's series with the
+    parameters of all sources; `data["pixels"]` has gain_j, sign_j and snr_share_j per source
+    (`SourceGains.columns`), `data["components"]` the sources, `predictive` every output
+    (`output_j`); the diagnostics hold n_sources, source_kinds, source_bands_hz,
+    combined_noise_covariance and, per source, effective_snr_gain and combined_noise_sigma.
     """
     from vibinverse.fitting import fit_series
     from vibinverse.io.scenes import load_scene
@@ -408,7 +718,18 @@ def fit_pixels(
     if scale is not None and displacement is None:
         raise InputError("scale: metres per pixel apply to a displacement fit; give displacement='x' or 'y' too")
     mask = select_pixels(cube, pixels)
+    if isinstance(sources, bool) or not isinstance(sources, (int, np.integer)) or not 1 <= sources <= int(mask.sum()):
+        raise InputError(f"sources: {sources!r}; allowed: an integer in [1, {int(mask.sum())}] (the selected pixels)")
+    if sources == 1 and bands is not None:
+        raise InputError("bands: one band per source for sources >= 2; with one source give band=(fmin, fmax)")
     matrix = PixelMatrix(cube, mask)
+    if sources > 1:
+        if displacement is not None:
+            raise InputError("displacement: the optical-flow gains describe one displacement; give sources=1")
+        if band is not None:
+            raise InputError("band: one band for one source; give bands=[(fmin, fmax), ...], one per source")
+        opts = dict(fit_options, reference="weighted" if reference is None else reference, iterations=iterations)
+        return _fit_sources(cube, pixels, matrix, scene, int(sources), bands, start, **opts)
     fixed = None
     units = matrix.units
     if displacement is not None:
@@ -447,6 +768,113 @@ def fit_pixels(
             "gain_iterations": gains.iterations,
             "gain_converged": gains.converged,
             "seed_band_hz": None if gains.band is None else list(gains.band),
+        }
+    )
+    result.timing = {"pixels_s": seconds, **result.timing}
+    return result
+
+
+def _source_table(scene: Any, r: int, series: Any) -> dict[str, Any]:
+    """The multi-output table of r sources from the fit's scene: a `multi_output` table as given
+    (its kinds), else the kinds chosen per output (`source_kinds`), a modal table's modes and
+    lines (when given, M + L = r) fixing how many are lines; one-line InputError for a scene that
+    describes one signal, or a modal table with drift or coloured noise."""
+    if isinstance(scene, Mapping) and "multi_output" in scene:
+        return copy.deepcopy(dict(scene))
+    if scene is not None and not (isinstance(scene, Mapping) and set(scene) <= {"modal", "infer"}):
+        raise InputError(f"sources: {r} sources are fitted as modes and lines (no scene); a scene describes one signal")
+    modal = dict((scene or {}).get("modal") or {})
+    if modal.get("drift") not in (None, False, "none") or modal.get("noise") not in (None, "white"):
+        raise InputError(f"sources: {r} sources are fitted in white noise; drop the drift and coloured noise")
+    modes, lines = modal.get("modes"), modal.get("lines")
+    if modes is not None and lines is not None and modes + lines != r:
+        raise InputError(f"modes and lines: {modes} + {lines} sources; --sources {r} needs them to add up to {r}")
+    count = None if lines is None and modes is None else (lines if lines is not None else r - modes)
+    if count is not None and not 0 <= count <= r:
+        raise InputError(f"modes: {modes}; with {r} sources allowed range [0, {r}]")
+    kinds, start = source_kinds(series, count)
+    return {"multi_output": {"sources": kinds, "start": start}}
+
+
+def _fit_sources(
+    cube: Any,
+    pixels: PixelsLike,
+    matrix: PixelMatrix,
+    scene: Any,
+    r: int,
+    bands: list[tuple[float, float]] | None,
+    start: float,
+    *,
+    reference: tuple[int, int] | str,
+    iterations: int,
+    **fit_options: Any,
+) -> FitResult:
+    """`fit_pixels` of r >= 2 sources (its docstring)."""
+    from vibinverse.fitting import fit_series
+    from vibinverse.imaging.pixels import cluster_lines, parse_cluster
+    from vibinverse.models import build_model
+    from vibinverse.models.multi_output import MultiOutputModel, multi_series
+
+    model = fit_options.pop("model", None)
+    if model not in (None, "modal", MultiOutputModel.name):
+        raise InputError(f"model: {model!r}; {r} sources are fitted by the {MultiOutputModel.name!r} model")
+    centres = None
+    if bands is None and isinstance(pixels, str) and parse_cluster(pixels) is not None:
+        path, k = parse_cluster(pixels)
+        centres = cluster_lines(path, k) or None
+        if centres is not None and len(centres) < r:
+            centres = None  # fewer lines than sources: the spectrum's bands
+    gains, z, log_r = estimate_sources(
+        matrix, r, bands=bands, centres=centres, reference=reference, iterations=iterations
+    )
+    t = matrix.time
+    offsets = matrix.row_offset()
+    if offsets is not None:
+        t = t + float(np.mean(gains.share.T @ offsets))
+    source = str(cube.attrs.get("source") or cube.name or "cube")
+    cov = gains.covariance
+    notes = [f"{UNITS_NOTE}{matrix.units}"] if matrix.units else []
+    series = multi_series(t, z, cov, f"{source}: {matrix.n} pixels, {r} sources", notes)
+    logger.info(
+        "%d pixels, %d sources (bands %s Hz): noise sd %s; SNR %s x the best pixel's",
+        matrix.n,
+        r,
+        ", ".join(f"{a:.4g}-{b:.4g}" for a, b in gains.bands),
+        ", ".join(f"{v:.4g}" for v in np.sqrt(np.diag(cov))),
+        ", ".join(f"{v:.3g}" for v in gains.snr_gain),
+    )
+    if isinstance(scene, (str, Path)):
+        from vibinverse.io.scenes import load_scene
+
+        scene = load_scene(scene)
+    table = _source_table(scene, r, series)
+    seconds = perf_counter() - start
+    result = fit_series(series, table, model=MultiOutputModel.name, **fit_options)
+    fitted = build_model(table, series, MultiOutputModel.name)
+    result.data["components"] = fitted.components(result.point)
+    result.data["pixels"] = gains.table()
+    if isinstance(pixels, (str, Path)):
+        result.data["pixel_selection"] = str(pixels)
+    means = fitted.output_means(result.point)
+    for j in range(r):
+        result.predictive[f"output_{j}"] = z[:, j]
+        result.predictive[f"model_mean_output_{j}"] = means[:, j]
+    refs = gains.references
+    result.diagnostics.update(
+        {
+            "n_pixels": matrix.n,
+            "n_sources": r,
+            "source_kinds": list(table["multi_output"]["sources"]),
+            "source_bands_hz": [list(b) for b in gains.bands],
+            "effective_snr_gain": gains.snr_gain,
+            "combined_noise_sigma": [float(v) for v in np.sqrt(np.diag(cov))],
+            "combined_noise_covariance": cov.tolist(),
+            "residual_log_likelihood": log_r,
+            "gain_convention": gains.convention,
+            "reference_pixel": None if refs is None else [[int(gains.y[k]), int(gains.x[k])] for k in refs],
+            "gain_iterations": gains.iterations,
+            "gain_converged": gains.converged,
+            "seed_band_hz": None,
         }
     )
     result.timing = {"pixels_s": seconds, **result.timing}

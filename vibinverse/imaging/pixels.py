@@ -353,7 +353,9 @@ def noise_levels(matrix: PixelMatrix) -> NoiseLevels:
     return NoiseLevels(valid, mean, sigma, freqs, trace, float(tv[-1] - tv[0]))
 
 
-def choose_band(levels: NoiseLevels, n: int, band: tuple[float, float] | None = None) -> slice:
+def choose_band(
+    levels: NoiseLevels, n: int, band: tuple[float, float] | None = None, *, exclude: np.ndarray | None = None
+) -> slice:
     """The bins of the strongest excess of the whitened trace spectrum (`NoiseLevels.trace`) inside
     `band` (Hz; default: above 3 cycles per record). Its centre: at the scale where it is most
     significant, for each width W in BAND_WIDTHS bins the running mean of trace / n - 1 (~0 on
@@ -361,7 +363,8 @@ def choose_band(levels: NoiseLevels, n: int, band: tuple[float, float] | None = 
     W = 1, a resonance at about its width. Its extent: the bins around the centre where the excess,
     smoothed over max(W, 5) bins (a resonance's periodogram is as spiky in every pixel: the signal
     is shared), stays above half its value at the centre, widened by max(W, 2) bins on each side,
-    at most MAX_BAND_BINS."""
+    at most MAX_BAND_BINS. `exclude` (a boolean per frequency): bins already taken by another
+    source's band, which count as noise (excess 0)."""
     freqs = levels.freqs
     lo, hi = band if band is not None else (3.0 / levels.span, float(freqs[-1]))
     if not (0 <= lo < hi):
@@ -372,6 +375,8 @@ def choose_band(levels: NoiseLevels, n: int, band: tuple[float, float] | None = 
     from vibinverse.models.modal import smooth
 
     excess = levels.trace[inside] / n - 1.0
+    if exclude is not None:
+        excess[np.asarray(exclude, dtype=bool)[inside]] = 0.0
     best = (-np.inf, 0, 1)
     for width in BAND_WIDTHS:
         if width > inside.size:
@@ -395,8 +400,15 @@ def choose_band(levels: NoiseLevels, n: int, band: tuple[float, float] | None = 
 def seed_gains(matrix: PixelMatrix, levels: NoiseLevels, band: tuple[float, float] | None = None) -> GainSeed:
     """The seed band (`choose_band`) and one pass over the pixels for its Fourier coefficients (a
     direct DFT at the band's frequencies: any stamps)."""
+    return seed_bands(matrix, levels, [choose_band(levels, matrix.n, band)])[0]
+
+
+def seed_bands(matrix: PixelMatrix, levels: NoiseLevels, bands: Sequence[slice]) -> list[GainSeed]:
+    """The Fourier coefficients of the de-meaned pixels at the frequencies of each band (slices of
+    `levels.freqs`), all in one pass over the pixels (a direct DFT: any stamps)."""
     valid, mean = levels.valid, levels.mean
-    f = levels.freqs[choose_band(levels, matrix.n, band)]
+    parts = [levels.freqs[b] for b in bands]
+    f = np.concatenate(parts)
     tv = matrix.time[valid]
     coef = np.zeros((matrix.n, f.size), dtype=complex)
     step = max(1, BLOCK_BYTES // (16 * f.size))  # the DFT's basis (time, K) a stretch of time at a time
@@ -405,8 +417,79 @@ def seed_gains(matrix: PixelMatrix, levels: NoiseLevels, band: tuple[float, floa
         for a in range(0, tv.size, step):
             basis = np.exp(-2j * np.pi * np.outer(tv[a : a + step] - tv[0], f))
             coef[sl] += d[a : a + step].T @ basis
-    logger.debug("gain seeds from the band %.4g-%.4g Hz (%d bins)", f[0], f[-1], f.size)
-    return GainSeed((float(f[0]), float(f[-1])), coef)
+    out, start = [], 0
+    for part in parts:
+        logger.debug("gain seeds from the band %.4g-%.4g Hz (%d bins)", part[0], part[-1], part.size)
+        out.append(GainSeed((float(part[0]), float(part[-1])), coef[:, start : start + part.size]))
+        start += part.size
+    return out
+
+
+def choose_bands(
+    levels: NoiseLevels,
+    n: int,
+    count: int,
+    *,
+    bands: Sequence[tuple[float, float]] | None = None,
+    centres: Sequence[float] | None = None,
+) -> list[slice]:
+    """The bands of `count` sources (slices of `levels.freqs`): the given `bands` (Hz), each
+    narrowed to its strongest excess (`choose_band`); else around the given `centres` (Hz, e.g. the
+    lines of a detection map's cluster, strongest first), each searched between the midpoints to
+    its neighbours; else the strongest excess of the whitened trace spectrum, then the strongest
+    outside it, and so on, each found band and as many bins again on each side excluded from the
+    next searches (separated peaks: a strong resonance's skirts are not a second source). Found
+    bands are returned in increasing frequency, given ones in their order. One-line InputError when
+    fewer bands are given or found than sources."""
+    if bands is not None:
+        if len(bands) != count:
+            raise InputError(f"bands: {len(bands)} given for {count} sources; give one (fmin, fmax) per source")
+        return [choose_band(levels, n, tuple(b)) for b in bands]
+    freqs = levels.freqs
+    if centres is not None:
+        cs = [float(c) for c in centres][:count]
+        if len(cs) < count:
+            raise InputError(f"sources: {count}; the detection map's cluster carries only {len(cs)} line(s)")
+        order = sorted(cs)
+        out = []
+        for c in cs:
+            k = order.index(c)
+            lo = 0.5 * (order[k - 1] + c) if k > 0 else 0.0
+            hi = 0.5 * (order[k + 1] + c) if k + 1 < len(order) else float(freqs[-1])
+            out.append(choose_band(levels, n, (lo, hi)))
+        return out
+    taken = np.zeros(freqs.size, dtype=bool)
+    lo = 3.0 / levels.span
+    out = []
+    for j in range(count):
+        if taken[freqs >= lo].all():
+            raise InputError(f"sources: {count}; the spectrum holds only {j} separated bands")
+        b = choose_band(levels, n, exclude=taken)
+        width = b.stop - b.start
+        taken[max(b.start - width, 0) : b.stop + width] = True
+        out.append(b)
+    return sorted(out, key=lambda b: b.start)
+
+
+def cluster_lines(path: str | Path, cluster: int) -> list[float]:
+    """The frequencies (Hz) of the lines a detection map's cluster carries (its `cluster_lines`),
+    strongest line first; [] when the map has no lines."""
+    import xarray as xr
+
+    from vibinverse.io.series import check_file
+
+    p = check_file(path, "pixels")
+    try:
+        with xr.open_dataset(p) as ds:
+            if "cluster_lines" not in ds or "line_frequency" not in ds:
+                return []
+            carried = ds["cluster_lines"].sel(cluster_id=cluster).values
+            freqs = np.asarray(ds["line_frequency"].values, dtype=float)
+    except KeyError:
+        return []
+    except (OSError, ValueError) as exc:
+        raise DataError(f"pixels: cannot read the detection map {p}: {str(exc).splitlines()[0]}") from None
+    return [float(f) for f, c in zip(freqs, np.asarray(carried)) if c]
 
 
 def band_gains(coef: np.ndarray, sigma: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from vibinverse.models.base import MODELS, LineTest, SignalModel, build_model, m
 from vibinverse.models.deterministic import DeterministicModel
 from vibinverse.models.frame import FrameModel
 from vibinverse.models.modal import ModalModel
+from vibinverse.models.multi_output import MultiOutputModel
 
 __all__ = [
     "MODELS",
@@ -17,6 +18,7 @@ __all__ = [
     "FrameModel",
     "LineTest",
     "ModalModel",
+    "MultiOutputModel",
     "SignalModel",
     "build_model",
     "model_class_for",

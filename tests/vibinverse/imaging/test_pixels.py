@@ -14,6 +14,8 @@ from vibinverse.imaging.pixels import (
     PixelMatrix,
     band_gains,
     choose_band,
+    choose_bands,
+    cluster_lines,
     cube_time,
     frame_axes,
     gradient_gains,
@@ -22,6 +24,7 @@ from vibinverse.imaging.pixels import (
     noise_levels,
     parse_cluster,
     periodograms,
+    seed_bands,
     seed_gains,
     select_pixels,
 )
@@ -224,3 +227,54 @@ def test_optical_flow_gains_are_the_negative_gradient_to_fourth_order():
     with pytest.raises(InputError, match="at least 3 are needed"):
         gradient_gains(frame[:, :2], "x")
     assert math.isfinite(gradient_gains(frame[:, :4], "x").sum())  # 3-4 pixels: second order only
+
+
+def _two_line_pixels(seed: int) -> tuple[PixelMatrix, np.ndarray]:
+    """12 pixels, 20 s at 50 Hz, noise sd 1: a strong line at 6.0 Hz (amplitude 1) through gains
+    g[:, 0] and a weaker one at 13.0 Hz (amplitude 0.3) through g[:, 1] (mixed signs)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(1000) / 50.0
+    g = rng.choice([-1.0, 1.0], (12, 2)) * rng.uniform(0.5, 1.5, (12, 2))
+    s = np.stack([np.cos(2 * np.pi * 6.0 * t), 0.3 * np.cos(2 * np.pi * 13.0 * t + 1)], axis=1)
+    y = s @ g.T + rng.normal(size=(t.size, 12))
+    cube = xr.DataArray(y.reshape(t.size, 3, 4), dims=("time", "y", "x"), coords={"time": t})
+    return PixelMatrix(cube, np.ones((3, 4), bool)), g
+
+
+def test_the_bands_of_several_sources_found_given_or_around_detected_lines():
+    """Two lines (amplitude SNR per pixel ~22 and ~7 over 20 s): the two strongest separated bands
+    hold 6.0 and 13.0 Hz, in increasing frequency, whatever their strength; given bands are kept
+    in their order; around the centres of a detection map's lines too (strongest first). Each
+    band's coefficients (`seed_bands`, one pass) give that line's gains with every sign right
+    (amplitude SNR >= 3.5 a pixel). Fewer bands than sources: one-line errors."""
+    matrix, g = _two_line_pixels(3)
+    levels = noise_levels(matrix)
+    found = choose_bands(levels, 12, 2)
+    assert [levels.freqs[b][0] <= f <= levels.freqs[b][-1] for b, f in zip(found, (6.0, 13.0))] == [True, True]
+    seeds = seed_bands(matrix, levels, found)
+    for j, seed in enumerate(seeds):
+        b = band_gains(seed.coef, levels.sigma)
+        assert np.array_equal(np.sign(b * (b @ g[:, j])), np.sign(g[:, j]))
+    given = choose_bands(levels, 12, 2, bands=[(12.0, 14.0), (5.0, 7.0)])
+    assert levels.freqs[given[0]][0] > 12.0 and levels.freqs[given[1]][-1] < 7.0
+    around = choose_bands(levels, 12, 2, centres=[13.0, 6.0])
+    assert [levels.freqs[b][0] <= f <= levels.freqs[b][-1] for b, f in zip(around, (13.0, 6.0))] == [True, True]
+    with pytest.raises(InputError, match="bands: 1 given for 2 sources"):
+        choose_bands(levels, 12, 2, bands=[(5.0, 7.0)])
+    with pytest.raises(InputError, match="carries only 1 line"):
+        choose_bands(levels, 12, 2, centres=[6.0])
+
+
+def test_the_lines_of_a_detection_cluster_strongest_first(tmp_path):
+    path = tmp_path / "detection.nc"
+    xr.Dataset(
+        {
+            "cluster": (("y", "x"), np.array([[1, 1], [2, 0]], dtype=np.int32)),
+            "line_frequency": (("line",), np.array([6.0, 13.0, 2.5])),
+            "cluster_lines": (("cluster_id", "line"), np.array([[1, 0, 1], [0, 1, 0]], dtype=np.int8)),
+        },
+        coords={"cluster_id": [1, 2], "line": [0, 1, 2]},
+    ).to_netcdf(path, engine="h5netcdf")
+    assert cluster_lines(path, 1) == [6.0, 2.5] and cluster_lines(path, 2) == [13.0]
+    write_detection(tmp_path / "bare.nc", [[1, 0], [0, 0]])
+    assert cluster_lines(tmp_path / "bare.nc", 1) == []

@@ -1,0 +1,568 @@
+"""Several outputs, one source each: the r-dimensional statistic of pixels that see r sources in
+different mixtures (`vibinverse.imaging.joint_fit.estimate_sources`), fitted by one Kalman filter
+with vector observations (`MultiOutputModel`, registered as "multi_output").
+
+    Z_j(t) = level_j + s_j(t) + n_j(t),    j = 0 .. r - 1,    n(t) ~ N(0, scale^2 C) white,
+
+with C the known noise covariance of the statistic, (G^T S^-1 G)^-1 (the joint fit's), and s_j
+the source of output j: a stochastic resonance of the modal model (`modes[i].frequency`,
+`.damping_ratio`, `.rms`: q'' + 2 zeta w q' + w^2 q = xi, two states) or a deterministic line
+(`lines[i].frequency`, `.amplitude`, `.phase`: the mean), the modes and lines numbered in the
+order of their outputs. `outputs[j].level` is output j's level; `noise.scale` (1: C as estimated,
+not free by default) scales the noise. The sources are independent: the transition is block
+diagonal, one 2 x 2 block per mode, each block's exact discretization (Phi, Q) and stationary P0
+taken from the modal model (`ModalModel.tables` of a one-mode model of that output), and a line's
+mean from a one-line modal model (`ModalModel.tables`), so that both models share one
+discretization.
+
+The likelihood, exactly: with C = L L^T (Cholesky), the whitened observation L^-1 (Z_t - m_t) =
+L^-1 H x_t + N(0, scale^2 I) has independent components, so the update by the vector
+observation is r sequential scalar updates (rows of L^-1 H, unit noise variance x scale^2), and
+
+    log p(Z) = sum_t [log N(L^-1 (Z_t - m_t); L^-1 H x_t|t-1, L^-1 H P L^-T H^T + scale^2 I)]
+               - T_obs log det L,
+
+the second term the Jacobian of the whitening (compiled kernel `_vector_filter`, numba nogil,
+O(T (n^2 + r n^2)) for n = 2 x modes states). A sample with NaN outputs observes the others only
+(the Cholesky factor of their block of C); an all-NaN sample is a gap; irregular stamps use the
+modal model's table of distinct steps (`ModalModel.steps`, `.idx`).
+
+The data: a `MultiSeries`, a `Series` whose `intensity` is output 0 (what a result file shows as
+the observed series) carrying all outputs (`outputs`, time x r) and C (`covariance`). The table:
+`{"multi_output": {"sources": ["mode", "line", ...], "start": {name: value}, "values": {name:
+value}}}` (one kind per output; `start`: the first starting point; `values`: fixed values of
+parameters that are not free); the model writes `data`, the outputs' fingerprint, into its copy of
+the table (the sampler's checkpoint compares the table before resuming).
+
+Per output, the default priors and the spectral starts are the modal model's for that output alone
+(a one-mode or one-line modal model of Z_j); there is no sorted-frequency constraint: each source
+is tied to its own output, so the labels do not switch. The Fisher information is the observed
+information by central differences of the exact likelihood (as the modal model's).
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import math
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from vibinverse.errors import SceneError
+from vibinverse.io.series import Series, validate
+from vibinverse.kalman import njit, simulate
+from vibinverse.models.base import LineTest, SignalModel, register_model
+from vibinverse.models.modal import ModalModel
+from vibinverse.priors import Prior
+
+SOURCE_KINDS = ("mode", "line")
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+# ------------------------------------------------------------------ the data
+
+
+@dataclass(frozen=True)
+class MultiSeries(Series):
+    """A series of r outputs on one time axis: `intensity` is output 0, `outputs` (time, r) all of
+    them (NaN = missing), `covariance` (r, r) their white noise's covariance (known)."""
+
+    outputs: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    covariance: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+
+    @property
+    def n_outputs(self) -> int:
+        return int(self.outputs.shape[1])
+
+    def output(self, j: int) -> Series:
+        """Output j as a plain `Series` (same stamps and notes)."""
+        return validate(self.time, self.outputs[:, j], f"{self.source} (output {j})", None, list(self.notes))
+
+
+def multi_series(
+    time: np.ndarray,
+    outputs: np.ndarray,
+    covariance: np.ndarray,
+    source: str = "outputs",
+    notes: list[str] | None = None,
+) -> MultiSeries:
+    """Check and build a `MultiSeries`: every output a valid series (`validate`), the covariance
+    symmetric positive definite of the outputs' number; one-line SceneError otherwise."""
+    z = np.asarray(outputs, dtype=np.float64)
+    cov = np.asarray(covariance, dtype=np.float64)
+    if z.ndim != 2 or z.shape[1] < 1:
+        raise SceneError(f"outputs: shape {z.shape}; (time, r) with r >= 1 is needed")
+    r = z.shape[1]
+    if cov.shape != (r, r) or not np.all(np.isfinite(cov)) or not np.allclose(cov, cov.T, rtol=1e-10, atol=0.0):
+        raise SceneError(f"covariance: must be a finite symmetric {r} x {r} matrix, got shape {cov.shape}")
+    try:
+        np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        raise SceneError("covariance: the outputs' noise covariance is not positive definite") from None
+    first = validate(time, z[:, 0], source, None, notes)
+    for j in range(1, r):
+        validate(time, z[:, j], source, None, notes)
+    return MultiSeries(
+        first.time, first.intensity, first.source, None, list(first.notes), z.copy(), 0.5 * (cov + cov.T)
+    )
+
+
+# ------------------------------------------------------------------ compiled kernels
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def _vector_filter(d, phis, qs, idx, lo, hi, h, cov, scale2, p0, white, lls):  # pragma: no cover - compiled
+    """log p of d_t = H x_t + v_t (d: (T, r), NaN = not observed; v ~ N(0, cov scale2)), x_t =
+    Phi x_{t-1} + w_t with Phi = phis[idx[t]] block diagonal (state i's block lo[i]..hi[i]) and
+    x_0 ~ N(0, P0): per sample, the Cholesky factor L of the observed block of cov, the whitened
+    L^-1 d and L^-1 H, r sequential scalar updates and the Jacobian -log det L (module docstring).
+    Standardized innovations to `white` (T, r) and each sample's log density to `lls` when they
+    are not empty (NaN where not observed)."""
+    nt, r = d.shape
+    n = p0.shape[0]
+    x = np.zeros(n)
+    xp = np.zeros(n)
+    p = p0.copy()
+    tmp = np.zeros((n, n))
+    ph = np.zeros(n)
+    lc = np.zeros((r, r))
+    hw = np.zeros((r, n))
+    v = np.zeros(r)
+    obs = np.zeros(r, dtype=np.int64)
+    prev = -1  # the observed pattern whose factor lc holds: r (all), else recomputed
+    logdet = 0.0
+    ll = 0.0
+    for k in range(nt):
+        if k > 0:
+            u = idx[k]
+            for i in range(n):
+                acc = 0.0
+                for m in range(lo[i], hi[i]):
+                    acc += phis[u, i, m] * x[m]
+                xp[i] = acc
+            for i in range(n):
+                x[i] = xp[i]
+            for i in range(n):  # tmp = Phi P
+                for j in range(n):
+                    acc = 0.0
+                    for m in range(lo[i], hi[i]):
+                        acc += phis[u, i, m] * p[m, j]
+                    tmp[i, j] = acc
+            for i in range(n):  # P = tmp Phi^T + Q
+                for j in range(i, n):
+                    acc = qs[u, i, j]
+                    for m in range(lo[j], hi[j]):
+                        acc += tmp[i, m] * phis[u, j, m]
+                    p[i, j] = acc
+                    p[j, i] = acc
+        m_obs = 0
+        for j in range(r):
+            if d[k, j] == d[k, j]:
+                obs[m_obs] = j
+                m_obs += 1
+        if m_obs == 0:
+            if lls.shape[0]:
+                lls[k] = np.nan
+            if white.shape[0]:
+                for j in range(r):
+                    white[k, j] = np.nan
+            continue
+        if not (m_obs == r and prev == r):  # the Cholesky factor of the observed block, and L^-1 H
+            for a in range(m_obs):
+                for b in range(a + 1):
+                    acc = cov[obs[a], obs[b]] * scale2
+                    for c in range(b):
+                        acc -= lc[a, c] * lc[b, c]
+                    if a == b:
+                        if not acc > 0.0:
+                            if lls.shape[0]:
+                                lls[k:] = -np.inf
+                            return -np.inf
+                        lc[a, a] = math.sqrt(acc)
+                    else:
+                        lc[a, b] = acc / lc[b, b]
+            logdet = 0.0
+            for a in range(m_obs):
+                logdet += math.log(lc[a, a])
+                for i in range(n):
+                    acc = h[obs[a], i]
+                    for c in range(a):
+                        acc -= lc[a, c] * hw[c, i]
+                    hw[a, i] = acc / lc[a, a]
+            prev = m_obs if m_obs == r else -1
+        for a in range(m_obs):  # the whitened observations
+            acc = d[k, obs[a]]
+            for c in range(a):
+                acc -= lc[a, c] * v[c]
+            v[a] = acc / lc[a, a]
+        lk = -logdet
+        for a in range(m_obs):
+            s = 1.0
+            e = v[a]
+            for i in range(n):
+                acc = 0.0
+                for j in range(n):
+                    acc += p[i, j] * hw[a, j]
+                ph[i] = acc
+            for i in range(n):
+                s += hw[a, i] * ph[i]
+                e -= hw[a, i] * x[i]
+            if not s > 0.0:
+                if lls.shape[0]:
+                    lls[k:] = -np.inf
+                return -np.inf
+            for i in range(n):
+                x[i] += ph[i] * e / s
+            for i in range(n):
+                g = ph[i] / s
+                for j in range(i, n):
+                    val = p[i, j] - g * ph[j]
+                    p[i, j] = val
+                    p[j, i] = val
+            lk += -0.5 * (math.log(s) + _LOG_2PI + e * e / s)
+            if white.shape[0]:
+                white[k, obs[a]] = e / math.sqrt(s)
+        if white.shape[0]:
+            for j in range(r):
+                if d[k, j] != d[k, j]:
+                    white[k, j] = np.nan
+        ll += lk
+        if lls.shape[0]:
+            lls[k] = lk
+    return ll
+
+
+# ------------------------------------------------------------------ the model
+
+
+@register_model
+class MultiOutputModel(SignalModel):
+    """r outputs, each one source (a mode or a line) in white noise of known covariance, one Kalman
+    filter with vector observations (module docstring)."""
+
+    name = "multi_output"
+    releases_gil = True  # numba nogil kernel; per-thread scratch arrays
+
+    @classmethod
+    def describes(cls, table: dict) -> bool:
+        """The table has a `multi_output` table."""
+        return isinstance(table, dict) and "multi_output" in table
+
+    def __init__(self, table: dict, series: Series):
+        self.base = copy.deepcopy(dict(table))
+        spec = self.base.get("multi_output")
+        if not isinstance(spec, dict):
+            raise SceneError("multi_output: must be a table, e.g. {sources = ['mode', 'mode']}")
+        unknown = set(spec) - {"sources", "start", "values", "data"}
+        if unknown:
+            raise SceneError(f"multi_output.{sorted(unknown)[0]}: unknown key; allowed: sources, start, values")
+        if not isinstance(series, MultiSeries):
+            raise SceneError(
+                "multi_output: the model fits the outputs of a multi-source joint fit "
+                "(vibinverse.imaging.joint_fit, sources >= 2), not a single series"
+            )
+        kinds = spec.get("sources")
+        if not isinstance(kinds, (list, tuple)) or len(kinds) != series.n_outputs:
+            raise SceneError(f"multi_output.sources: one kind per output ({series.n_outputs}), e.g. ['mode', 'line']")
+        for k in kinds:
+            if k not in SOURCE_KINDS:
+                raise SceneError(f"multi_output.sources: {k!r}; allowed: {', '.join(map(repr, SOURCE_KINDS))}")
+        # the data's fingerprint in the table (the sampler's checkpoint compares it before resuming)
+        digest = hashlib.sha256(series.outputs.tobytes() + series.covariance.tobytes()).hexdigest()[:16]
+        spec["data"] = digest
+        self.kinds = [str(k) for k in kinds]
+        self.series = series
+        self.r = series.n_outputs
+        self.t = np.ascontiguousarray(series.time, dtype=float)
+        self.z = np.ascontiguousarray(series.outputs, dtype=float)
+        self.cov = np.ascontiguousarray(series.covariance, dtype=float)
+        self.good = np.isfinite(self.z)
+        self.sd = float(np.nanstd(self.z)) or 1.0
+        # per output: (index among its kind, a one-component modal model of that output alone)
+        self.index: list[int] = []
+        self.inner: list[ModalModel] = []
+        counts = {"mode": 0, "line": 0}
+        for j, kind in enumerate(self.kinds):
+            self.index.append(counts[kind])
+            counts[kind] += 1
+            order = {"modes": int(kind == "mode"), "lines": int(kind == "line"), "drift": False, "noise": "white"}
+            self.inner.append(ModalModel({"modal": order}, series.output(j)))
+        self.n_modes, self.n_lines = counts["mode"], counts["line"]
+        self.steps, self.idx = self.inner[0].steps, np.ascontiguousarray(self.inner[0].idx, dtype=np.int64)
+        self.n = max(2 * self.n_modes, 1)  # one dummy state nobody sees when there is no mode
+        self.h = np.zeros((self.r, self.n))
+        self.lo = np.zeros(self.n, dtype=np.int64)
+        self.hi = np.ones(self.n, dtype=np.int64)
+        for j, kind in enumerate(self.kinds):
+            if kind == "mode":
+                o = 2 * self.index[j]
+                self.h[j, o] = 1.0
+                self.lo[o : o + 2], self.hi[o : o + 2] = o, o + 2
+        if self.n_modes == 0:
+            self.lo[0], self.hi[0] = 0, 1
+        self._names = self._all_names()
+        self._fixed = {k: float(v) for k, v in (spec.get("values") or {}).items()}
+        self._start = {k: float(v) for k, v in (spec.get("start") or {}).items()}
+        self._defaults: dict[str, float] | None = None
+        self._buffers: dict[int, tuple[np.ndarray, ...]] = {}
+
+    # -------------------------------------------------------------- names
+    def _all_names(self) -> list[str]:
+        out = [f"outputs[{j}].level" for j in range(self.r)]
+        for j, kind in enumerate(self.kinds):
+            i = self.index[j]
+            if kind == "mode":
+                out += [f"modes[{i}].frequency", f"modes[{i}].damping_ratio", f"modes[{i}].rms"]
+            else:
+                out += [f"lines[{i}].frequency", f"lines[{i}].amplitude", f"lines[{i}].phase"]
+        return [*out, "noise.scale"]
+
+    def _output_names(self, j: int) -> dict[str, str]:
+        """This model's names of output j's parameters -> its one-component modal model's names."""
+        kind, i = self.kinds[j], self.index[j]
+        base = "modes" if kind == "mode" else "lines"
+        fields = ("frequency", "damping_ratio", "rms") if kind == "mode" else ("frequency", "amplitude", "phase")
+        out = {f"outputs[{j}].level": "level"}
+        out.update({f"{base}[{i}].{f}": f"{base}[0].{f}" for f in fields})
+        return out
+
+    def output_of(self, name: str) -> int | None:
+        """The output a parameter belongs to (None: `noise.scale`)."""
+        for j in range(self.r):
+            if name in self._output_names(j):
+                return j
+        return None
+
+    def value(self, values: dict[str, float], name: str) -> float:
+        """A parameter's value: from `values`, else fixed by the table, else its start, else the
+        spectral guess."""
+        if name in values:
+            return values[name]
+        if name in self._fixed:
+            return self._fixed[name]
+        if name == "noise.scale":
+            return 1.0
+        if self._defaults is None:
+            self._defaults = {**self._spectral_guess(), **self._start, **self._fixed}
+        return self._defaults[name]
+
+    def _inner_values(self, values: dict[str, float], j: int) -> dict[str, float]:
+        inner = {m: self.value(values, n) for n, m in self._output_names(j).items()}
+        inner["noise.sigma"] = 1.0  # not read: the noise is the outputs' covariance
+        return inner
+
+    # -------------------------------------------------------------- the tables
+    def _scratch(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        key = threading.get_ident()
+        out = self._buffers.get(key)
+        if out is None:
+            phis = np.zeros((self.steps.size, self.n, self.n))
+            out = (phis, np.zeros_like(phis), np.zeros((self.n, self.n)), np.empty((self.t.size, self.r)))
+            self._buffers[key] = out
+        return out
+
+    def tables(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(means (time, r), phis, qs, P0) at `values`: each mode's 2 x 2 blocks and each line's
+        mean from the one-component modal model of its output (`ModalModel.tables`). The arrays
+        are reused by the next call in this thread."""
+        phis, qs, p0, means = self._scratch()
+        if self.n_modes == 0:
+            phis[:, 0, 0] = 1.0
+        for j, kind in enumerate(self.kinds):
+            mean, ph, q, _, p = self.inner[j].tables(self._inner_values(values, j))
+            means[:, j] = mean
+            if kind == "mode":
+                o = 2 * self.index[j]
+                phis[:, o : o + 2, o : o + 2] = ph
+                qs[:, o : o + 2, o : o + 2] = q
+                p0[o : o + 2, o : o + 2] = p
+        return means, phis, qs, p0
+
+    def _valid(self, values: dict[str, float]) -> bool:
+        for n in self._names:
+            val = self.value(values, n)
+            if not math.isfinite(val):
+                return False
+            if n.endswith(("frequency", "damping_ratio", "noise.scale")) and not val > 0:
+                return False
+            if n.endswith(("rms", "amplitude")) and val < 0:
+                return False
+        return True
+
+    def _run(self, values: dict[str, float], white: np.ndarray, lls: np.ndarray) -> float:
+        means, phis, qs, p0 = self.tables(values)
+        scale2 = self.value(values, "noise.scale") ** 2
+        d = self.z - means
+        return float(_vector_filter(d, phis, qs, self.idx, self.lo, self.hi, self.h, self.cov, scale2, p0, white, lls))
+
+    # -------------------------------------------------------------- SignalModel
+    def fittable(self) -> set[str]:
+        return set(self._names)
+
+    def describe(self) -> dict[str, Any]:
+        return {"kind": "multi_output", "sources": list(self.kinds), "outputs": self.r}
+
+    def output_means(self, values: dict[str, float]) -> np.ndarray:
+        """Each output's deterministic part (level, or level + line) at the data's stamps (time, r)."""
+        return self.tables(values)[0].copy()
+
+    def mean(self, values: dict[str, float]) -> np.ndarray:
+        """Output 0's deterministic part (the series a result shows)."""
+        return self.output_means(values)[:, 0]
+
+    def log_likelihood(self, values: dict[str, float]) -> float:
+        """The exact Gaussian log-likelihood of all outputs (module docstring); -inf outside what
+        the model allows (a frequency, damping ratio or noise scale <= 0, a negative rms or
+        amplitude)."""
+        if not self._valid(values):
+            return -math.inf
+        ll = self._run(values, np.empty((0, 0)), np.empty(0))
+        return ll if math.isfinite(ll) else -math.inf
+
+    def pointwise_log_likelihood(self, values: dict[str, float]) -> np.ndarray:
+        """Each sample's one-step predictive log density of all its outputs (NaN at gaps)."""
+        out = np.empty(self.t.size)
+        self._run(values, np.empty((0, 0)), out)
+        return out
+
+    def output_residuals(self, values: dict[str, float]) -> np.ndarray:
+        """The standardized innovations of the whitened sequential updates (time, r): all
+        independent N(0, 1) when the model describes the data; NaN where not observed."""
+        out = np.empty((self.t.size, self.r))
+        self._run(values, out, np.empty(0))
+        return out
+
+    def residuals(self, values: dict[str, float]) -> np.ndarray:
+        """One standardized residual per sample: the sum of its outputs' standardized innovations
+        over the square root of their number (N(0, 1), independent between samples, when the
+        model fits; `output_residuals` has each)."""
+        e = self.output_residuals(values)
+        count = np.sum(np.isfinite(e), axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = np.nansum(e, axis=1) / np.sqrt(count)
+        out[count == 0] = np.nan
+        return out
+
+    def replicate_outputs(self, values: dict[str, float], rng: np.random.Generator) -> np.ndarray:
+        """A draw of all outputs at the data's stamps (modes from their stationary law, noise of
+        covariance scale^2 C), NaN where the data miss."""
+        means, phis, qs, p0 = self.tables(values)
+        out = means.copy()
+        for j, kind in enumerate(self.kinds):
+            if kind == "mode":
+                o = 2 * self.index[j]
+                blk = slice(o, o + 2)
+                out[:, j] += simulate(phis[:, blk, blk], qs[:, blk, blk], self.idx, [1.0, 0.0], 0.0, p0[blk, blk], rng)
+        chol = np.linalg.cholesky(self.cov) * self.value(values, "noise.scale")
+        out += rng.standard_normal((self.t.size, self.r)) @ chol.T
+        out[~self.good] = np.nan
+        return out
+
+    def replicate(self, values: dict[str, float], rng: np.random.Generator) -> np.ndarray:
+        """Output 0 of a draw of all outputs (`replicate_outputs`)."""
+        return self.replicate_outputs(values, rng)[:, 0]
+
+    def units(self, name: str) -> tuple[str, str]:
+        """The one-component modal model's units of the parameter (intensity units for levels,
+        rms and amplitudes); `noise.scale` is a ratio."""
+        if name == "noise.scale":
+            return "1", "scale of the outputs' noise covariance (1: as estimated from the pixels)"
+        j = self.output_of(name)
+        if j is None:
+            return "1", name
+        units, long_name = self.inner[j].units(self._output_names(j)[name])
+        return units, f"output {j} {long_name}"
+
+    def default_priors(self) -> dict[str, Prior]:
+        """Per output, the one-component modal model's default priors of that output (the level,
+        the mode's or line's parameters); `noise.scale` is not free by default."""
+        out: dict[str, Prior] = {}
+        for j in range(self.r):
+            priors = self.inner[j].default_priors()
+            for n, m in self._output_names(j).items():
+                out[n] = priors[m]
+        return {n: out[n] for n in self._names if n in out}
+
+    def _spectral_guess(self) -> dict[str, float]:
+        """The first spectral start of each output's one-component modal model."""
+        out: dict[str, float] = {"noise.scale": 1.0}
+        for j in range(self.r):
+            inner = self.inner[j]
+            g = inner.guesses(inner.default_priors())[0]
+            out.update({n: float(g[m]) for n, m in self._output_names(j).items()})
+        return out
+
+    def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
+        """The table's `start` over the spectral starts of each output (`_spectral_guess`)."""
+        return [{**self._spectral_guess(), **self._start}]
+
+    def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
+        """Each line (its amplitude to 0) and each mode (its rms to 0)."""
+        out = []
+        for j, kind in enumerate(self.kinds):
+            i = self.index[j]
+            if kind == "line":
+                f = f"lines[{i}].frequency"
+                out.append(LineTest(f"line_{i}", {f"lines[{i}].amplitude": 0.0}, f if f in free else None))
+            else:
+                f = f"modes[{i}].frequency"
+                out.append(LineTest(f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None))
+        return out
+
+    def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
+        """The observed information -d^2 log L / d theta^2 at `values` by central differences of
+        the exact log-likelihood, each step a tenth of the parameter's sd (from a first pass at
+        1e-4 of its scale), at most half its value for a positive parameter."""
+        v0 = {**{n: self.value(values, n) for n in self._names}, **values}
+        ll = lambda d: self._run({**v0, **d}, np.empty((0, 0)), np.empty(0))
+        f0 = ll({})
+        positive = lambda n: not n.endswith(("phase", "level"))
+        steps = []
+        for n in names:
+            scale = 1.0 if n.endswith("phase") else (self.sd if n.endswith("level") else abs(v0[n]))
+            h = 1e-4 * max(scale, 1e-6 * self.sd)
+            curv = -(ll({n: v0[n] + h}) - 2 * f0 + ll({n: v0[n] - h})) / h**2
+            h2 = 0.1 / math.sqrt(curv) if curv > 0 and math.isfinite(curv) else h
+            if positive(n) and v0[n] > 0:
+                h2 = min(h2, 0.5 * v0[n])
+            steps.append(h2)
+        k = len(names)
+        out = np.zeros((k, k))
+        for a in range(k):
+            na, ha = names[a], steps[a]
+            out[a, a] = -(ll({na: v0[na] + ha}) - 2 * f0 + ll({na: v0[na] - ha})) / ha**2
+            for b in range(a):
+                nb, hb = names[b], steps[b]
+                pp = ll({na: v0[na] + ha, nb: v0[nb] + hb})
+                pm = ll({na: v0[na] + ha, nb: v0[nb] - hb})
+                mp = ll({na: v0[na] - ha, nb: v0[nb] + hb})
+                mm = ll({na: v0[na] - ha, nb: v0[nb] - hb})
+                out[a, b] = out[b, a] = -(pp - pm - mp + mm) / (4 * ha * hb)
+        return out
+
+    def components(self, values: dict[str, float]) -> list[dict[str, Any]]:
+        """The fitted sources at `values`, JSON-able, one per output: its kind, output, index and
+        parameters, and the output's level."""
+        v = lambda n: float(self.value(values, n))
+        out: list[dict[str, Any]] = []
+        for j, kind in enumerate(self.kinds):
+            i = self.index[j]
+            row: dict[str, Any] = {"kind": kind, "output": j, "index": i, "level": v(f"outputs[{j}].level")}
+            if kind == "mode":
+                row.update(
+                    frequency=v(f"modes[{i}].frequency"),
+                    damping_ratio=v(f"modes[{i}].damping_ratio"),
+                    rms=v(f"modes[{i}].rms"),
+                )
+            else:
+                row.update(
+                    frequency=v(f"lines[{i}].frequency"),
+                    amplitude=v(f"lines[{i}].amplitude"),
+                    phase=v(f"lines[{i}].phase"),
+                )
+            out.append(row)
+        out.append({"kind": "white noise", "covariance": self.cov.tolist(), "scale": v("noise.scale")})
+        return out
