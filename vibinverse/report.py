@@ -545,20 +545,29 @@ def _corner(summary: dict, idata: Any, safe: dict, names: list[str]) -> Callable
     return _drawn_elsewhere(render)
 
 
+def _source_index(key: str) -> int:
+    """j of a `gain_j` column."""
+    return int(key.split("_", 1)[1]) if key.split("_", 1)[1].isdigit() else 10**6
+
+
 def pixels_figure(summary: dict, where: Path) -> tuple[str, str, str] | None:
     """A joint fit of many pixels (`data["pixels"]`): each pixel's fitted gain (its sign: facets
-    tilting opposite ways) on the frame; beside it the detection map the pixels were chosen from,
-    when the selection names one (`DIR/detection.nc:K`, found as given or beside the result), with
-    the fitted pixels outlined. None for a single series."""
+    tilting opposite ways) on the frame, one panel per source when the pixels see several sources
+    in different mixtures (`gain_0`, `gain_1`, ...); beside them the detection map the pixels were
+    chosen from, when the selection names one (`DIR/detection.nc:K`, found as given or beside the
+    result), with the fitted pixels outlined. None for a single series."""
     table = summary["data"].get("pixels")
-    if not isinstance(table, dict) or not all(k in table for k in ("y", "x", "gain")):
+    if not isinstance(table, dict) or not all(k in table for k in ("y", "x")):
+        return None
+    keys = ["gain"] if "gain" in table else sorted((k for k in table if k.startswith("gain_")), key=_source_index)
+    if not keys:
         return None
     try:
         ys, xs = np.asarray(table["y"], dtype=int), np.asarray(table["x"], dtype=int)
-        gains = np.asarray(table["gain"], dtype=float)
+        gains = [np.asarray(table[k], dtype=float) for k in keys]
     except (TypeError, ValueError):
         return None
-    if ys.size == 0 or ys.shape != xs.shape or ys.shape != gains.shape or ys.min() < 0 or xs.min() < 0:
+    if ys.size == 0 or ys.shape != xs.shape or any(ys.shape != g.shape for g in gains) or ys.min() < 0 or xs.min() < 0:
         return None
     import matplotlib.pyplot as plt
 
@@ -566,10 +575,14 @@ def pixels_figure(summary: dict, where: Path) -> tuple[str, str, str] | None:
     shape = detection["peak_snr"].shape if detection is not None else (int(ys.max()) + 1, int(xs.max()) + 1)
     if ys.max() >= shape[0] or xs.max() >= shape[1]:
         detection, shape = None, (int(ys.max()) + 1, int(xs.max()) + 1)
-    gain_map = np.full(shape, np.nan)
-    gain_map[ys, xs] = gains
-    mask = np.isfinite(gain_map)
-    panels = 2 if detection is not None else 1
+    maps = []
+    for g in gains:
+        gain_map = np.full(shape, np.nan)
+        gain_map[ys, xs] = g
+        maps.append(gain_map)
+    mask = np.isfinite(maps[0])
+    first = 1 if detection is not None else 0
+    panels = first + len(maps)
     fig, axes = plt.subplots(1, panels, figsize=(4.6 * panels + 0.8, 4.2), constrained_layout=True, squeeze=False)
     if detection is not None:
         ax = axes[0, 0]
@@ -577,17 +590,30 @@ def pixels_figure(summary: dict, where: Path) -> tuple[str, str, str] | None:
         ax.contour(mask.astype(float), levels=[0.5], colors="cyan", linewidths=1.0)
         fig.colorbar(im, ax=ax, label="peak SNR (whitened power)")
         ax.set(title="detection map; fitted pixels outlined", xlabel="x (pixel)", ylabel="y (pixel)")
-    ax = axes[0, panels - 1]
-    top = float(np.nanmax(np.abs(gains))) or 1.0
-    im = ax.imshow(gain_map, cmap="RdBu_r", vmin=-top, vmax=top, origin="upper")
-    fig.colorbar(im, ax=ax, label="gain (relative)")
-    ax.set(title=f"{ys.size} pixels fitted jointly: gain and sign", xlabel="x (pixel)", ylabel="y (pixel)")
+    kinds = summary["diagnostics"].get("source_kinds") or []
+    for j, (g, gain_map) in enumerate(zip(gains, maps)):
+        ax = axes[0, first + j]
+        top = float(np.nanmax(np.abs(g))) or 1.0
+        im = ax.imshow(gain_map, cmap="RdBu_r", vmin=-top, vmax=top, origin="upper")
+        fig.colorbar(im, ax=ax, label="gain (relative)")
+        title = f"{ys.size} pixels fitted jointly: gain and sign"
+        if len(maps) > 1:
+            kind = kinds[j] if j < len(kinds) else "source"
+            title = f"source {j} ({kind}): gain and sign"
+        ax.set(title=title, xlabel="x (pixel)", ylabel="y (pixel)")
     n = summary["diagnostics"].get("n_pixels", ys.size)
     snr = summary["diagnostics"].get("effective_snr_gain")
+    snr_text = (
+        ", ".join(format_number(v, ".2f") + "x" for v in snr)
+        if isinstance(snr, list)
+        else format_number(snr, ".2f") + "x"
+    )
+    shared = "one shared signal" if len(maps) == 1 else f"{len(maps)} shared sources, seen in different mixtures"
     caption = (
-        f"The {format_number(n, '.0f')} pixels fitted jointly (one shared signal, a gain with its sign, an offset and "
-        f"a noise level each; red and blue: opposite signs, which add rather than cancel). Combined, they give "
-        f"{format_number(snr, '.2f')}x the amplitude SNR of the best single pixel"
+        f"The {format_number(n, '.0f')} pixels fitted jointly ({shared}, a gain with its sign per source, an offset "
+        f"and a noise level each; red and blue: opposite signs, which add rather than cancel). Combined, they give "
+        f"{snr_text} the amplitude SNR of the best single pixel"
+        + (" (per source)" if len(maps) > 1 else "")
         + ("; left, the detection map they were chosen from." if detection is not None else ".")
     )
     return ("Pixels", _png(fig), caption)

@@ -572,7 +572,7 @@ def test_two_plate_modes_seen_in_mixed_patterns_are_fitted_jointly():
     assert seconds < 20
 
 
-def test_pixels_that_carry_one_mode_get_no_gain_on_the_other():
+def test_pixels_that_carry_one_mode_get_no_gain_on_the_other(tmp_path):
     """6 x 4 pixels: rows 0-1 see only mode 0, rows 2-3 only mode 1, rows 4-5 both (gains U(0.5,
     1.5) with random signs, noise U(0.8, 1.2), 4000 samples). A pixel's gain on a source it does
     not see is 0 to within the noise of the band estimate, sd_i = k sigma_i / sqrt(E) (E the source's
@@ -599,6 +599,11 @@ def test_pixels_that_carry_one_mode_get_no_gain_on_the_other():
         sd = abs(k) * sig / math.sqrt(energy)
         assert np.all(np.abs(est[zero]) < 4 * sd[zero]), np.abs(est[zero]) / sd[zero]
         assert np.all(np.abs(est[seen]) > 10 * sd[seen])
+    # the report draws one gain map per source
+    from vibinverse.report import write_report
+
+    page = write_report(r.to_netcdf(tmp_path / "result.nc"), tmp_path).read_text()
+    assert "<h2>Pixels</h2>" in page and "2 shared sources, seen in different mixtures" in page
 
 
 @pytest.mark.parametrize(
