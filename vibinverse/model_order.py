@@ -1,5 +1,5 @@
 """The order of the modal model, chosen by the data: how many resonances and lines, and whether a
-drift and coloured noise are there (`choose_order`).
+drift, coloured noise and a multiplicative gain drift are there (`choose_order`).
 
 Greedy forward selection by the Bayesian information criterion
 
@@ -10,7 +10,8 @@ model's standardized one-step residuals (innovations: white where the model desc
 irregular stamps a Lomb-Scargle periodogram at the stamps themselves) and proposes, at its strongest
 peak, a resonance (the peak of the smoothed residual spectrum) and a line (its highest bin), plus
 each nuisance term not yet in the model: a random-walk
-drift, AR(1) noise, 1/f noise. A nuisance term is first screened on a grid of starting values (one
+drift, AR(1) noise, 1/f noise, a gain drift (started along the least-squares fit of its cosines to
+the level's relative change, `gain_candidate`). A nuisance term is first screened on a grid of starting values (one
 likelihood each) and dropped when no point of the grid gains. Each candidate is then fitted with
 only its new parameters, the level and the white noise free (the rest held at the current optimum:
 cheap, and a lower bound on its likelihood gain); the best `REFIT_TOP` of them (by that partial
@@ -19,17 +20,19 @@ likelihood inside the priors' support (the MAP under flat priors), in the Poster
 space (L-BFGS-B with finite-difference gradients, each coordinate scaled by its curvature; a new
 mode from two damping starts). The candidate that lowers the BIC most is kept. When no addition
 lowers it, backward and exchange moves are tried the same way (each mode, line, drift or coloured
-noise removed; AR(1) and 1/f exchanged; a coloured noise and a random-walk drift exchanged): the
+noise removed; AR(1) and 1/f exchanged; a coloured noise and a random-walk drift exchanged; an
+additive drift and a gain drift exchanged, both of which explain a changing level): the
 greedy forward step may take a heavily damped low-frequency mode, or a slow AR(1), for what is
 AR(1) noise, or a drift, and the stepwise search undoes it. The search stops when no move lowers
-the BIC, or at the caps (6 modes, 6 lines). A component the user fixes (`modes`, `lines`, `drift`
-or `noise` in the `modal` table) is not searched.
+the BIC, or at the caps (6 modes, 6 lines). A component the user fixes (`modes`, `lines`, `drift`,
+`noise` or `gain` in the `modal` table) is not searched.
 
 Why BIC: it is a consistent criterion for the order (the probability of choosing the true order
 goes to 1 as n grows, where AIC keeps a fixed chance of adding spurious components), and its
 penalty per added line or mode (3 parameters: frequency, amplitude or damping, phase or rms),
 1.5 ln n in log-likelihood, is 12.4 at n = 4000: the 5-sigma gain (12.5) the detection test
-(`vibinverse.detection`) asks of a line at a known frequency. A drift costs 0.5 ln n, AR(1) noise
+(`vibinverse.detection`) asks of a line at a known frequency. A gain drift (6 cosines) costs
+3 ln n: it enters when the vibration's amplitude visibly follows the level. A drift costs 0.5 ln n, AR(1) noise
 ln n, 1/f noise 0.5 ln n.
 
 Each mode and line also pays the look-elsewhere term 2 ln M, M = (Nyquist - 1 / span) x span the
@@ -57,7 +60,7 @@ from scipy.optimize import minimize
 
 from vibinverse.errors import NumericalError
 from vibinverse.io.series import MIN_CYCLES, Series
-from vibinverse.models.modal import ModalModel, ModalSpec, mode_start, smooth, spectrum
+from vibinverse.models.modal import GAIN_TERMS, ModalModel, ModalSpec, gain_names, mode_start, smooth, spectrum
 from vibinverse.priors import ParameterSpace
 
 logger = logging.getLogger(__name__)
@@ -65,7 +68,7 @@ logger = logging.getLogger(__name__)
 MAX_MODES = 6
 MAX_LINES = 6
 REFIT_TOP = 2  # candidates refitted with every parameter free, per step
-SEARCHED = ("modes", "lines", "drift", "noise")
+SEARCHED = ("modes", "lines", "drift", "noise", "gain")
 
 
 @dataclass
@@ -271,7 +274,22 @@ def candidates(fit: OrderFit, series: Series, search: dict[str, bool], caps: tup
             for c in (0.1, 0.3, 0.9)
         ]
         out.append(Candidate("1/f noise", replace(spec, noise="1/f"), grid, ["flicker.rms"]))
+    if search["gain"] and not spec.gain:
+        out.append(gain_candidate(model, values, spec))
     return out
+
+
+def gain_candidate(model: ModalModel, values: dict[str, float], spec: ModalSpec) -> Candidate:
+    """A multiplicative gain drift of GAIN_TERMS cosines, started on a grid along the least-squares
+    fit of the cosines to the relative change of the level (`ModalModel.gain_start`): 1/2, 1 and
+    3/2 of it, and, when a drift is in the model (it may already hold the level's change), the same
+    with the drift's rate a tenth."""
+    names = gain_names(GAIN_TERMS)
+    coef = model.gain_start(GAIN_TERMS)
+    grid = [{**values, **{n: float(c * k) for n, c in zip(names, coef)}} for k in (0.5, 1.0, 1.5)]
+    if spec.drift != "none":
+        grid += [{**g, "drift.rate": 0.1 * values["drift.rate"]} for g in grid]
+    return Candidate("gain drift (multiplicative)", replace(spec, gain=GAIN_TERMS), grid, names)
 
 
 def screen(series: Series, current: OrderFit, c: Candidate) -> tuple[Candidate, float]:
@@ -304,7 +322,7 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
     sigma = values["noise.sigma"]
     span = max(fit.model.span, series.dt)
     out: list[Candidate] = []
-    nuisance = ["drift.rate", "ar.rms", "ar.time", "flicker.rms"]
+    nuisance = ["drift.rate", "ar.rms", "ar.time", "flicker.rms", *gain_names(GAIN_TERMS)]
 
     def move(what: str, new_spec: ModalSpec, starts: list[dict[str, float]]) -> Candidate:
         names = set(new_spec.names())
@@ -334,6 +352,18 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
             ]
         )
         out.append(move(f"{spec.noise} noise exchanged for {other} noise", replace(spec, noise=other), starts))
+    if search["gain"] and spec.gain:
+        out.append(move("remove the gain drift", replace(spec, gain=0), [dict(values)]))
+        if search["drift"] and spec.drift == "none":
+            start = {**values, "drift.rate": 0.1 * sigma / math.sqrt(span)}
+            out.append(
+                move("the gain drift exchanged for a random-walk drift", replace(spec, gain=0, drift="walk"), [start])
+            )
+    if search["gain"] and search["drift"] and not spec.gain and spec.drift != "none":
+        names = gain_names(GAIN_TERMS)
+        coef = fit.model.gain_start(GAIN_TERMS)
+        start = {**values, **{n: float(c) for n, c in zip(names, coef)}}
+        out.append(move("the drift exchanged for a gain drift", replace(spec, gain=GAIN_TERMS, drift="none"), [start]))
     if search["noise"] and search["drift"]:
         rms = values.get("ar.rms", values.get("flicker.rms", sigma))
         if spec.noise != "white" and spec.drift == "none":
@@ -426,6 +456,8 @@ def _describe(spec: ModalSpec) -> str:
     if spec.drift != "none":
         parts.append(f"{spec.drift} drift")
     parts.append(f"{spec.noise} noise")
+    if spec.gain:
+        parts.append(f"gain drift ({spec.gain} cosines)")
     return ", ".join(parts)
 
 
@@ -438,6 +470,7 @@ def _row(step: int, what: str, fit: OrderFit, before: float | None, refit: str, 
         "lines": fit.spec.lines,
         "drift": fit.spec.drift,
         "noise": fit.spec.noise,
+        "gain": fit.spec.gain,
         "k": fit.k,
         "log_likelihood": float(fit.log_likelihood),
         "bic": float(fit.bic),

@@ -463,7 +463,7 @@ class ModalFitter:
             series = vi.series(t, y, source="robustness bench")
             if self.fixed:
                 k, m = order if order is not None else (1, 1)
-                scene = {"modal": {"modes": int(k), "lines": int(m), "drift": True, "noise": self.noise}}
+                scene = {"modal": {"modes": int(k), "lines": int(m), "drift": True, "noise": self.noise, "gain": False}}
             else:
                 scene = None
             with _quiet():

@@ -330,12 +330,12 @@ def cmd_fit(args: argparse.Namespace) -> dict[str, Any]:
     return _result(summary, written)
 
 
-MODAL_OPTIONS = ("modes", "lines", "drift", "noise")
+MODAL_OPTIONS = ("modes", "lines", "drift", "noise", "gain")
 
 
 def _fit_table(args: argparse.Namespace) -> dict[str, Any]:
     """The scene table of a fit: the scene file, or without one the generic modal model, whose
-    order `--modes`, `--lines`, `--drift` and `--noise` fix (the rest is chosen by BIC)."""
+    order `--modes`, `--lines`, `--drift`, `--noise` and `--gain` fix (the rest is chosen by BIC)."""
     given = {k: getattr(args, k) for k in MODAL_OPTIONS if getattr(args, k) is not None}
     if args.scene is not None:
         if given:
@@ -353,6 +353,8 @@ def _fit_table(args: argparse.Namespace) -> dict[str, Any]:
             raise InputError(f"--{k}: {given[k]} is outside the allowed range [0, 6]")
     if "drift" in given:
         given["drift"] = {"none": False}.get(given["drift"], given["drift"])
+    if "gain" in given:
+        given["gain"] = given["gain"] == "drift"
     return {"modal": given}
 
 
@@ -615,6 +617,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fit.add_argument(
         "--noise", choices=("white", "ar1", "1/f"), help="without --scene: fix the noise model (white + which term)"
+    )
+    fit.add_argument(
+        "--gain",
+        choices=("none", "drift"),
+        help="without --scene: fix the multiplicative gain drift (a cloud dims the whole signal): none, or drift "
+        "(6 cosines, 0.5-3 cycles per record)",
     )
     fit.add_argument("--set", action="append", metavar="dotted.key=value", help="override a scene value")
     fit.add_argument(

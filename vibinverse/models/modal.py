@@ -1,7 +1,7 @@
 """A scene-less generic modal model: a measured series as stochastic resonances, deterministic lines
 and nuisance terms, all in one Kalman filter (`ModalModel`, registered as "modal").
 
-    y(t) = level + sum_i q_i(t) + sum_j A_j cos(2 pi f_j t + phase_j) + d(t) + c(t) + e(t)
+    y(t) = (1 + g(t)) [level + sum_i q_i(t) + sum_j A_j cos(2 pi f_j t + phase_j)] + d(t) + c(t) + e(t)
 
 - q_i: K resonances (`modes[i].frequency` f in Hz, `modes[i].damping_ratio` zeta,
   `modes[i].rms` the stationary RMS in the intensity's units): q'' + 2 zeta w q' + w^2 q = xi(t),
@@ -17,6 +17,13 @@ and nuisance terms, all in one Kalman filter (`ModalModel`, registered as "modal
   10 and 100 cycles per record), each of variance `flicker.rms`^2 / 3: a spectrum ~ 1/f between
   the corners.
 - e: white sensor noise (`noise.sigma`).
+- g: a multiplicative gain drift (a cloud dims the whole signal, the vibration included; `gain`
+  J > 0 cosines, `gain.a1` .. `gain.aJ`): g(t) = sum_j a_j cos(pi j u), u = (t - t0) / span, from
+  0.5 to J / 2 cycles per record (J = 6 by default: a smooth change over the record). Given the
+  coefficients the model stays linear-Gaussian: the level and the lines are multiplied by
+  1 + g(t_k), and the modes' observation row by the same factor at each sample (the filter's
+  observation vector varies per sample, `_block_filter`'s `hm`), so the likelihood is exact.
+  1 + g must stay positive.
 
 Every random block is discretized exactly over each time step (`_fill_tables`, compiled): the
 oscillator by the closed form of the Van Loan matrix exponential (Phi = e^{A dt},
@@ -68,6 +75,8 @@ from vibinverse.priors import Prior
 NOISE_KINDS = ("white", "ar1", "1/f")
 DRIFT_KINDS = ("none", "walk", "integrated")
 FLICKER_DECADES = (1.0, 0.1, 0.01)  # correlation times, x span / (2 pi)
+GAIN_TERMS = 6  # the gain drift's cosines: 0.5 to 3 cycles per record
+GAIN_LIMIT = 0.5  # each coefficient's prior: uniform (-limit, limit)
 FREEZE_TOL = 1e-14  # the filter holds its gain once the covariance has converged to this (relative)
 
 _OSC, _WALK, _IWALK, _OU = 0, 1, 2, 3
@@ -79,13 +88,14 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 @dataclass(frozen=True)
 class ModalSpec:
-    """The model's order: K modes, L lines, the drift ("none", "walk", "integrated") and the
-    coloured noise ("white", "ar1", "1/f")."""
+    """The model's order: K modes, L lines, the drift ("none", "walk", "integrated"), the
+    coloured noise ("white", "ar1", "1/f") and the gain drift's number of cosines (0: none)."""
 
     modes: int = 0
     lines: int = 0
     drift: str = "none"
     noise: str = "white"
+    gain: int = 0
 
     @classmethod
     def from_table(cls, table: dict[str, Any]) -> ModalSpec:
@@ -95,10 +105,10 @@ class ModalSpec:
             m = {}
         if not isinstance(m, dict):
             raise SceneError("modal: must be a table, e.g. {modes = 2, lines = 0, drift = true, noise = 'ar1'}")
-        unknown = set(m) - {"modes", "lines", "drift", "noise", "values", "start"}
+        unknown = set(m) - {"modes", "lines", "drift", "noise", "gain", "values", "start"}
         if unknown:
             raise SceneError(
-                f"modal.{sorted(unknown)[0]}: unknown key; allowed: modes, lines, drift, noise, values, start"
+                f"modal.{sorted(unknown)[0]}: unknown key; allowed: modes, lines, drift, noise, gain, values, start"
             )
         out = {}
         for key in ("modes", "lines"):
@@ -116,7 +126,14 @@ class ModalSpec:
         noise = m.get("noise", "white")
         if noise not in NOISE_KINDS:
             raise SceneError(f"modal.noise: {noise!r}; allowed: {', '.join(repr(k) for k in NOISE_KINDS)}")
-        return cls(out["modes"], out["lines"], drift, noise)
+        gain = m.get("gain", False)
+        if gain is True:
+            gain = GAIN_TERMS
+        elif gain is False or gain is None:
+            gain = 0
+        if isinstance(gain, bool) or not isinstance(gain, (int, np.integer)) or not 0 <= int(gain) <= 24:
+            raise SceneError(f"modal.gain: {m.get('gain')!r}; allowed: false, true ({GAIN_TERMS} cosines) or 0..24")
+        return cls(out["modes"], out["lines"], drift, noise, int(gain))
 
     def table(self) -> dict[str, Any]:
         """The `modal` sub-table of this order."""
@@ -125,6 +142,7 @@ class ModalSpec:
             "lines": self.lines,
             "drift": self.drift != "none" and self.drift,
             "noise": self.noise,
+            "gain": self.gain,
         }
 
     def names(self) -> list[str]:
@@ -140,6 +158,7 @@ class ModalSpec:
             out += ["ar.rms", "ar.time"]
         elif self.noise == "1/f":
             out.append("flicker.rms")
+        out += gain_names(self.gain)
         out.append("noise.sigma")
         return out
 
@@ -149,6 +168,18 @@ class ModalSpec:
             + {"none": 0, "walk": 1, "integrated": 2}[self.drift]
             + {"white": 0, "ar1": 1, "1/f": 3}[self.noise]
         )
+
+
+def gain_names(terms: int) -> list[str]:
+    """The gain drift's coefficients, `gain.a1` .. `gain.a<terms>`."""
+    return [f"gain.a{j}" for j in range(1, terms + 1)]
+
+
+def gain_basis(t: np.ndarray, terms: int) -> np.ndarray:
+    """(terms, T): cos(pi j u), u = (t - t0) / span from 0 to 1, j = 1..terms: j / 2 cycles per
+    record, none with a mean over the record of more than 1 / (pi j) (the level stays the level)."""
+    u = (t - t[0]) / max(float(t[-1] - t[0]), 1e-300)
+    return np.ascontiguousarray(np.cos(np.pi * np.arange(1, terms + 1)[:, None] * u[None, :]))
 
 
 # ------------------------------------------------------------------ compiled kernels
@@ -315,15 +346,19 @@ def _predict_cov(p, phi, q, bs, bz):  # pragma: no cover - compiled
 
 
 @njit(cache=True, fastmath=False, nogil=True)
-def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls):  # pragma: no cover - compiled
+def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, nscaled):  # pragma: no cover - compiled
     """log p(y) of x_k = Phi_k x_{k-1} + w_k, y_k = h . x_k + v_k with block-diagonal Phi_k
     (= phis[idx[k]]; state i's block is lo[i]..hi[i]) and Q_k, x_0 ~ N(0, P0); NaN gaps skipped.
     Writes the standardized innovations to `white` and each sample's log density to `lls` when
     they are not empty (NaN at gaps). With `freeze`, the gain and the innovation variance are held
     once they stop changing between two observed samples of the same step (their change,
     extrapolated geometrically, below FREEZE_TOL of their scale: the Riccati recursion's fixed point
-    to rounding), until a gap or another step (module docstring)."""
+    to rounding), until a gap or another step (module docstring). `hm` (empty, or one value per
+    sample): the gain drift, multiplying the observation of states 0..nscaled-1 (the modes) at each
+    sample; the gain then changes every sample, so it is never held (`freeze` must be False)."""
     n = phis.shape[1]
+    hk = h.copy()
+    vary = hm.shape[0] > 0
     nb = 0
     for i in range(n):
         nb += lo[i] == i
@@ -400,16 +435,19 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls):  # pr
             if lls.shape[0]:
                 lls[k] = np.nan
             continue
+        if vary:
+            for i in range(nscaled):
+                hk[i] = h[i] * hm[k]
         s = r
         v = yk
         for i in range(n):
             acc = 0.0
             for jj in range(nobs):
-                acc += p[i, seen[jj]] * h[seen[jj]]
+                acc += p[i, seen[jj]] * hk[seen[jj]]
             ph[i] = acc
         for jj in range(nobs):
-            s += h[seen[jj]] * ph[seen[jj]]
-            v -= h[seen[jj]] * x[seen[jj]]
+            s += hk[seen[jj]] * ph[seen[jj]]
+            v -= hk[seen[jj]] * x[seen[jj]]
         if not s > 0.0:
             if lls.shape[0]:
                 lls[k:] = -np.inf
@@ -668,12 +706,14 @@ class ModalModel(SignalModel):
             h[0] = 0.0
         self.lo, self.hi, self.h = lo, hi, h
         self._nstate = max(o, 1)
+        self.n_scaled = 2 * s.modes  # the states the gain drift multiplies: the modes'
+        self.gain_basis = gain_basis(self.t, s.gain) if s.gain else np.zeros((0, self.t.size))
         # the tables' arrays, reused between calls, one set per thread (`releases_gil`: threads
         # evaluate walkers at once); a dict by thread id stays picklable
         self._buffers: dict[int, tuple[np.ndarray, ...]] = {}
 
-    def _scratch(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(phis, qs, p0, pars, mean) of the calling thread."""
+    def _scratch(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(phis, qs, p0, pars, mean, multiplier) of the calling thread."""
         key = threading.get_ident()
         out = self._buffers.get(key)
         if out is None:
@@ -684,6 +724,7 @@ class ModalModel(SignalModel):
                 np.zeros((self._nstate, self._nstate)),
                 np.zeros((self.kinds.size, 3)),
                 np.empty(self.t.size),
+                np.empty(self.t.size if self.spec.gain else 0),
             )
             self._buffers[key] = out
         return out
@@ -702,7 +743,7 @@ class ModalModel(SignalModel):
     def tables(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray]:
         """(mean, phis, qs, r, P0) at `values` (the arrays are reused by the next call in this thread)."""
         s, v = self.spec, lambda n: self.value(values, n)
-        phis, qs, p0, pars, mean = self._scratch()
+        phis, qs, p0, pars, mean, _ = self._scratch()
         b = 0
         for i in range(s.modes):
             w = 2.0 * math.pi * v(f"modes[{i}].frequency")
@@ -729,12 +770,42 @@ class ModalModel(SignalModel):
         else:
             f = a = ph = np.zeros(0)
         _lines_mean(self.t, float(v("level")), f, a, ph, mean)
+        if s.gain:
+            mean *= self.multiplier(values)
         return mean, phis, qs, float(v("noise.sigma")) ** 2, p0
+
+    def multiplier(self, values: dict[str, float]) -> np.ndarray:
+        """1 + g(t) at the stamps (the gain drift; module docstring), or an empty array without one
+        (reused by the next call in this thread)."""
+        out = self._scratch()[5]
+        if self.spec.gain:
+            c = np.array([self.value(values, n) for n in gain_names(self.spec.gain)])
+            np.dot(c, self.gain_basis, out=out)
+            out += 1.0
+        return out
 
     def _run(self, values: dict[str, float], white: np.ndarray, lls: np.ndarray, freeze: bool = True) -> float:
         mean, phis, qs, r, p0 = self.tables(values)
+        hm = self._scratch()[5]  # filled by `tables`
+        if hm.size and not hm.min() > 0.0:
+            return -math.inf
         return float(
-            _block_filter(self.y - mean, phis, qs, self.idx, self.lo, self.hi, self.h, r, p0, freeze, white, lls)
+            _block_filter(
+                self.y - mean,
+                phis,
+                qs,
+                self.idx,
+                self.lo,
+                self.hi,
+                self.h,
+                r,
+                p0,
+                freeze and not hm.size,
+                white,
+                lls,
+                hm,
+                self.n_scaled,
+            )
         )
 
     def _sorted(self, values: dict[str, float]) -> bool:
@@ -798,10 +869,19 @@ class ModalModel(SignalModel):
         """A draw of the model at the data's stamps (states started in their stationary law, the
         walk at 0), plus the white noise; NaN at the data's gaps. Compiled, one pass."""
         mean, phis, qs, r, p0 = self.tables(values)
+        hm = self._scratch()[5].copy()
         x0 = _root(p0) @ rng.standard_normal(self._nstate)
         z = rng.standard_normal((self.t.size, self._nstate))
+        roots = np.ascontiguousarray(_root(qs))
         out = np.empty(self.t.size)
-        _propagate(phis, np.ascontiguousarray(_root(qs)), self.idx, self.lo, self.hi, x0, z, self.h, out)
+        if hm.size:  # the modes' part times 1 + g, the nuisance states' as they are
+            seen_modes = np.where(np.arange(self.h.size) < self.n_scaled, self.h, 0.0)
+            _propagate(phis, roots, self.idx, self.lo, self.hi, x0, z, seen_modes, out)
+            rest = np.empty(self.t.size)
+            _propagate(phis, roots, self.idx, self.lo, self.hi, x0, z, self.h - seen_modes, rest)
+            out = hm * out + rest
+        else:
+            _propagate(phis, roots, self.idx, self.lo, self.hi, x0, z, self.h, out)
         out += mean + math.sqrt(r) * rng.standard_normal(self.t.size)
         out[~self.good] = np.nan
         return out
@@ -823,6 +903,8 @@ class ModalModel(SignalModel):
             return iu, "level at the first sample"
         if name == "ar.time":
             return "s", "AR(1) correlation time"
+        if name.startswith("gain.a"):
+            return "", f"gain drift, cosine of {int(name[6:]) / 2:g} cycles per record"
         return parameter_units(name, iu)
 
     def default_priors(self) -> dict[str, Prior]:
@@ -830,8 +912,8 @@ class ModalModel(SignalModel):
         damping ratios log-uniform 1e-4..0.9; mode rms log-uniform sd x (1e-4, 10); line amplitudes
         uniform 0..3 sd; phases uniform(-pi, pi); level uniform over the data's range widened by it
         on each side; noise.sigma and the coloured noise's rms log-uniform sd x (1e-6, 10); ar.time
-        log-uniform (dt / 5, span); drift.rate log-uniform sd / sqrt(span) x (1e-5, 30). (sd: the
-        data's standard deviation.)"""
+        log-uniform (dt / 5, span); drift.rate log-uniform sd / sqrt(span) x (1e-5, 30); the gain
+        drift's coefficients uniform (-0.5, 0.5). (sd: the data's standard deviation.)"""
         sd, span, nyq = self.sd, max(self.span, self.dt), 0.5 * self.series.fs
         lo = MIN_CYCLES / span * (1.0 + 1e-9)  # past rounding (`check_resolves`)
         ymin, ymax = float(np.nanmin(self.y)), float(np.nanmax(self.y))
@@ -853,6 +935,8 @@ class ModalModel(SignalModel):
             out["ar.time"] = Prior("loguniform", (self.dt / 5.0, span))
         elif self.spec.noise == "1/f":
             out["flicker.rms"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
+        for n in gain_names(self.spec.gain):
+            out[n] = Prior("uniform", (-GAIN_LIMIT, GAIN_LIMIT))
         out["noise.sigma"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
         return out
 
@@ -894,6 +978,7 @@ class ModalModel(SignalModel):
             "ar.rms": 0.5 * self.sd,
             "ar.time": 10.0 * self.dt,
             "flicker.rms": 0.3 * self.sd,
+            **dict(zip(gain_names(s.gain), map(float, self.gain_start()))),
         }
         if s.drift == "integrated":
             base["drift.rate"] /= max(self.span, self.dt)
@@ -917,6 +1002,21 @@ class ModalModel(SignalModel):
                 g[f"lines[{j}].frequency"], g[f"lines[{j}].amplitude"], g[f"lines[{j}].phase"] = float(best), a, ph
             out.append({k: g[k] for k in self._names})
         return out
+
+    def gain_start(self, terms: int | None = None) -> np.ndarray:
+        """Starting coefficients of a gain drift of `terms` cosines (default: the model's): the
+        least-squares fit of the cosines (and a constant, dropped) to y / mean(y) - 1, which keeps
+        the slow relative change of the level (the projection on J smooth cosines averages the
+        vibration out); zeros when the level is not well above the data's sd (a relative change
+        of a level near 0 means nothing), clipped inside the prior."""
+        terms = self.spec.gain if terms is None else terms
+        level = float(np.nanmean(self.y))
+        if not terms or not abs(level) > self.sd:
+            return np.zeros(terms)
+        basis = gain_basis(self.t, terms)[:, self.good]
+        design = np.vstack([np.ones(basis.shape[1]), basis]).T
+        coef = np.linalg.lstsq(design, self.y[self.good] / level - 1.0, rcond=None)[0][1:]
+        return np.clip(coef, -0.9 * GAIN_LIMIT, 0.9 * GAIN_LIMIT).astype(float)
 
     def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
         """The table's `start` first (the order search's optimum), else the spectral starts
@@ -1009,6 +1109,16 @@ class ModalModel(SignalModel):
             out.append({"kind": "coloured noise", "model": "ar1", "rms": v("ar.rms"), "time": v("ar.time")})
         elif s.noise == "1/f":
             out.append({"kind": "coloured noise", "model": "1/f", "rms": v("flicker.rms")})
+        if s.gain:
+            g = self.multiplier(values) - 1.0
+            out.append(
+                {
+                    "kind": "gain drift",
+                    "terms": s.gain,
+                    "largest": float(np.max(np.abs(g))),
+                    "coefficients": [v(n) for n in gain_names(s.gain)],
+                }
+            )
         out.append({"kind": "white noise", "sigma": v("noise.sigma")})
         return out
 

@@ -420,7 +420,8 @@ def test_bench_modes_are_one_at_a_time(tmp_path):
 
 
 def test_fit_without_a_scene_uses_the_modal_model_with_the_order_fixed_or_chosen(tmp_path, capsys):
-    """A series and no scene: resonances and lines in intensity units; --modes/--lines/--noise fix them."""
+    """A series and no scene: resonances and lines in intensity units; --modes/--lines/--noise/--drift/--gain
+    fix them; --gain drift forces the multiplicative gain drift in (6 cosines, near 0 here)."""
     rng = np.random.default_rng(4)
     fs, n = 20.0, 2400
     t = np.arange(n) / fs
@@ -447,6 +448,8 @@ def test_fit_without_a_scene_uses_the_modal_model_with_the_order_fixed_or_chosen
         "white",
         "--drift",
         "none",
+        "--gain",
+        "none",
         "-o",
         str(tmp_path / "fixed"),
     )
@@ -457,3 +460,11 @@ def test_fit_without_a_scene_uses_the_modal_model_with_the_order_fixed_or_chosen
     assert [k for k in chosen["parameters"] if k.endswith(".frequency")] == ["modes[0].frequency"]
     assert chosen["diagnostics"]["model_order"]  # the BIC table of the search
     assert chosen["parameters"]["modes[0].frequency"]["median"] == pytest.approx(2.2, rel=0.01)
+    forced, _ = cli_json(
+        capsys,
+        *("fit", str(data), "--method", "map", "--modes", "1", "--lines", "0", "--noise", "white"),
+        *("--drift", "none", "--gain", "drift", "-o", str(tmp_path / "forced")),
+    )
+    gains = [forced["parameters"][f"gain.a{j}"]["median"] for j in range(1, 7)]
+    assert max(abs(g) for g in gains) < 0.2  # no gain drift in the data: each coefficient ~ its sd
+    assert forced["parameters"]["modes[0].frequency"]["median"] == pytest.approx(2.2, rel=0.01)

@@ -12,7 +12,7 @@ import xarray as xr
 from vibinverse.cli import main
 from vibinverse.result import read_result
 
-ORDER = ["--modes", "0", "--lines", "1", "--drift", "none", "--noise", "white", "--method", "map"]
+ORDER = ["--modes", "0", "--lines", "1", "--drift", "none", "--noise", "white", "--gain", "none", "--method", "map"]
 GAINS = np.array([[1.0, -0.8, 0.6], [-1.2, 0.9, 0.0]])  # (y, x); pixel (1, 2) sees nothing
 
 

@@ -33,8 +33,12 @@ from vibinverse.io.series import Series, validate
 from vibinverse.models import build_model
 from vibinverse.spectrum import sinusoid
 
-LINE = {"modal": {"modes": 0, "lines": 1, "drift": False, "noise": "white"}}  # one drive line, order fixed
-MODE = {"modal": {"modes": 1, "lines": 0, "drift": False, "noise": "white"}}  # one noise-driven resonance
+LINE = {
+    "modal": {"modes": 0, "lines": 1, "drift": False, "noise": "white", "gain": False}
+}  # one drive line, order fixed
+MODE = {
+    "modal": {"modes": 1, "lines": 0, "drift": False, "noise": "white", "gain": False}
+}  # one noise-driven resonance
 F_LINE = "lines[0].frequency"
 F_MODE = "modes[0].frequency"
 FS, T = 100.0, 2000  # 20 s at 100 Hz
@@ -565,7 +569,9 @@ def test_two_plate_modes_seen_in_mixed_patterns_are_fitted_jointly():
     assert np.all(np.sign(g1[2:6, :3]) == -np.sign(g1[2:6, 5:]))  # mixed signs, resolved
     assert set(table) >= {"gain_0", "gain_1", "sign_0", "sign_1", "snr_share_0", "snr_share_1", "sigma"}
     assert joint.predictive["output_1"].shape == (PLATE_T,)
-    single = fit_pixels(c, "all", {"modal": {"modes": 2, "lines": 0, "drift": False, "noise": "white"}}, method="map")
+    single = fit_pixels(
+        c, "all", {"modal": {"modes": 2, "lines": 0, "drift": False, "noise": "white", "gain": False}}, method="map"
+    )
     sd_single = [single.sd[f"modes[{i}].frequency"] / f for i, (f, _) in enumerate(PLATE_MODES)]
     worse = int(np.argmax(sd_single))
     assert joint.sd[f"modes[{worse}].frequency"] < single.sd[f"modes[{worse}].frequency"]
