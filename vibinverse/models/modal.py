@@ -904,7 +904,7 @@ class ModalModel(SignalModel):
         if name == "ar.time":
             return "s", "AR(1) correlation time"
         if name.startswith("gain.a"):
-            return "", f"gain drift, cosine of {int(name[6:]) / 2:g} cycles per record"
+            return "1", f"gain drift, cosine of {int(name[6:]) / 2:g} cycles per record"
         return parameter_units(name, iu)
 
     def default_priors(self) -> dict[str, Prior]:
