@@ -142,10 +142,17 @@ def run(scene_dir: Path, quick: bool, log=LOG) -> dict:
     out["scaling"] = scaling_rows(scene_dir, log=log)
     log("speed against error (elastic roof, 1000 samples):")
     out["speed_error"] = speed_error_rows(scene_dir, res, log=log)
-    from vibinverse.bench.likelihood_bench import demo_mcmc_row, likelihood_row, response_fit_row
+    from vibinverse.bench.likelihood_bench import (
+        demo_mcmc_row,
+        likelihood_row,
+        modal_likelihood_rows,
+        response_fit_row,
+    )
 
     log("likelihood (sec. 4.2 frame) against celerite2:")
     out["likelihood"] = likelihood_row(scene_dir / "roof_frame.toml", log=log)
+    log("scene-less modal likelihood, with and without nuisance terms, against celerite2:")
+    out["modal_likelihood"] = modal_likelihood_rows(log=log)
     log("likelihood of a deterministic scene (sec. 4.1 elastic roof) against dense rendering:")
     out["response_likelihood"] = response_fit_row(scene_dir / "roof_elastic.toml", log=log)
     from vibinverse.bench.design_bench import design_row

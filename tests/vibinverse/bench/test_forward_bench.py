@@ -19,6 +19,10 @@ def test_forward_bench_rows_have_the_documented_fields():
 
     lk = likelihood_row(SCENES / "roof_frame.toml", log=lambda *a: None)
     assert lk["samples"] == 4000 and lk["ours_us"] > 0 and lk["ratio"] > 0
+    from vibinverse.bench.likelihood_bench import modal_likelihood_rows
+
+    rows = modal_likelihood_rows(n=500, log=lambda *a: None)
+    assert [r["goal"] for r in rows] == [1.0, 1.5] and all(r["ratio"] > 0 for r in rows)
     from vibinverse.bench.design_bench import design_row
 
     d = design_row(SCENES / "roof_elastic.toml", 4, workers=(1,), log=lambda *a: None)
