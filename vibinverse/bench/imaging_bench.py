@@ -7,8 +7,9 @@ Four measurements, each a ratio against a reference computed in the same run (ma
 - **detection throughput**: `vibinverse detect` read from a netCDF file on disk (the cube written by
   the imager) in pixel-samples per second, against a single-threaded numpy rfft of the same cube
   already in memory (the limit of any per-pixel spectral method); goal >= 0.5x at 2 workers.
-- **peak memory**: the detection in a fresh process, the peak of the memory its arrays held at once
-  (tracemalloc, which sees numpy's buffers in every thread), against the cube's size.
+- **peak memory**: the detection run again in that process, the peak of the memory its arrays held
+  at once (tracemalloc, which sees numpy's buffers in every thread; not while timed: it takes the
+  GIL at every allocation), against the cube's size.
 - **multi-pixel fit**: `fit_pixels` (casadi MAP of the roof's frame model) over N = 1, 4, 16, 64
   roof pixels of equal SNR: seconds (goal: 64 pixels <= 3x one pixel), and the Laplace sd of the
   drive frequency times sqrt(N), constant when the pixels combine near-optimally (DESIGN.md sec. 9).
@@ -87,15 +88,17 @@ def _rfft_seconds(values: np.ndarray) -> float:
     return best
 
 
+# timed first, untraced: tracemalloc takes the GIL at every numpy allocation, which serializes the
+# workers (measured: 1.6-2.3x the CPU time of the detection); then traced, for the peak memory
 _CHILD = """
 import json, sys, time, tracemalloc
 from vibinverse.io.cube import open_cube
 from vibinverse.imaging.detection_map import detection_map
-cube = open_cube(sys.argv[1])
-tracemalloc.start()  # numpy's buffers, in every thread: the arrays the detection holds at once
 t0 = time.perf_counter()
-found = detection_map(cube, workers=int(sys.argv[2]))
+found = detection_map(open_cube(sys.argv[1]), workers=int(sys.argv[2]))
 seconds = time.perf_counter() - t0
+tracemalloc.start()  # numpy's buffers, in every thread: the arrays the detection holds at once
+detection_map(open_cube(sys.argv[1]), workers=int(sys.argv[2]))
 peak = tracemalloc.get_traced_memory()[1]
 print(json.dumps({"peak_bytes": peak, "seconds": seconds, "lines": [line.frequency for line in found.lines]}))
 """
@@ -120,8 +123,8 @@ def detection_row(cube: Any, table: dict, workdir: Path, workers: int = 2) -> di
     t, ny, nx = cube.shape
     samples = t * ny * nx
     limit = _rfft_seconds(cube.intensity)
-    # a fresh process: the interpreter, the modules and the lazy cube, then the detection (its time
-    # includes reading the file); the peak of the memory its arrays held at once (tracemalloc)
+    # a fresh process: the interpreter and the modules, then the detection timed (opening and reading
+    # the file included); then again, the peak of the memory its arrays held at once (tracemalloc)
     run = _child(path, workers)
     size_mb = cube.intensity.nbytes / 2**20
     above_mb = run["peak_bytes"] / 2**20

@@ -2,31 +2,14 @@
 its strongest peak and the peak's false-alarm probability, the lines seen anywhere in the frame,
 and the clusters of pixels that carry them. Run chunk by chunk on Dask (`scheduler`).
 
-Per pixel (float64, a batch of pixels at a time):
+Per pixel (float64, a batch of pixels at a time), items 1-4 in `vibinverse.imaging.whitening`:
 
 1. The mean and a least-squares linear trend are removed.
-2. Periodogram on the Fourier frequencies f_k = k / T (T = N dt, the record length; k = 1 .. below
-   Nyquist): uniform stamps (within 2 % of a step of a uniform grid) by an rfft (scipy.fft),
-   |sum y e^{-2 pi i f t}|^2 / N; irregular stamps (jitter, dropped frames) by the floating-mean
-   Lomb-Scargle periodogram of nifty-ls ("psd" normalization: the same quantity on a uniform grid),
-   T = span + the median step, up to half the median sample rate. On these frequencies the powers
-   of white noise are independent and exponential.
-3. Whitening by a robust local noise floor, whatever the noise colour (drift, 1/f, AR(1),
-   quantization): first a smooth baseline, a cubic in ln f fitted to ln P (it takes out power laws
-   and knees, which a median over a window of linear frequency would smear), then the median of
-   P / baseline over windows of w = 2h + 1 bins (h = 64) that tile the frequencies, each bin taking
-   its own window's. The floor is baseline * median / c, with c the mean of the (h+1)-th smallest
-   of w Exp(1) values, c = H_w - H_h (H_n the harmonic numbers; ln 2 as w grows: the median of an
-   exponential is ln 2 times its mean). The whitened power z = P / floor is ~ Exp(1) on noise
-   (mean 1 + O(1/h)), and a line's z is its power in units of the floor (its SNR).
-4. Its tail is exact for white noise: when P exceeds the window's median, that median is the
-   (h+1)-th smallest of the other 2h powers, and for exponential powers (ordered-statistic CFAR,
-   Rohling 1983)
-
-       P(z > s) = prod_{i=0}^{h} (2h - i) / (2h - i + s / c),
-
-   which tends to e^{-s} as h grows (with h = 64 it is heavier: ~30x e^{-s} at s = 24, the price
-   of estimating the floor from 128 neighbours). `log_tail` computes it.
+2. The periodogram on the Fourier frequencies k / T (rfft on uniform stamps, Lomb-Scargle on
+   irregular ones).
+3. Whitening by a robust local noise floor (a cubic baseline in ln f, then the median of
+   P / baseline over windows of 129 bins): z = P / floor is ~ Exp(1) on noise, a line's z its SNR.
+4. The exact tail of z on white noise, P(z > s) (`log_tail`).
 5. The peak of z in the band: its frequency (refined by a parabola through ln P at the three bins
    around it), its SNR, and its false-alarm probability corrected for the M frequencies searched
    (`pixel_false_alarm_probability`) and for the M frequencies AND the P pixels
@@ -37,7 +20,10 @@ Lines: per Fourier frequency, the largest z over all pixels; frequencies whose c
 false-alarm probability 1 - (1 - p)^{M P} is below `alpha` are lines, merged when at most
 `MERGE_GAP` = 2 bins apart (a strong line's sidelobes, a damped resonance's hump, which dips below
 the threshold between its bins; so lines closer than 4 / T are one), the strongest `max_lines`
-kept. A second pass takes every pixel's z within one bin of each line (the SNR map).
+kept. A second pass takes every pixel's z within one bin of each line (the SNR map): the first
+pass keeps each pixel's fitted floor (`whitening.Floor`, n_windows + 4 numbers), so the second
+needs the powers at the lines' bins only, by a direct DFT at those bins on uniform stamps
+(`whitening.dft_power`: one matrix product per slab of frames; no whole transform, no whitening).
 A pixel carries a line when its p-value there (corrected for the <= 3 bins) passes the
 Benjamini-Hochberg procedure over all pixels at level `alpha` (expected fraction of false pixels
 <= alpha). Clusters are the connected components (8-neighbours, scipy.ndimage.label) of the
@@ -51,10 +37,14 @@ record), where drifts and their leakage live. A rolling shutter's per-row time o
 never its power, and is ignored here.
 
 Chunks: the time axis whole, the frame cut into spatial blocks so that the blocks in flight and
-their float64 work fit `memory` bytes (`plan_chunks`). A cube whose time axis is split in chunks
-(video frames, netCDF read by frames) is read block by block (each block's reads are its own tasks,
-so only its pixels are held), never rechunked whole; a cube that fits in a quarter of `memory` is
-read once and kept for the second pass.
+their float64 work fit `memory` bytes (`plan_chunks`), each of at most `BLOCK_BYTES`. A cube whose
+time axis is split in chunks (video frames, netCDF read by frames) is read block by block (each
+block's reads are its own tasks, so only its pixels are held), never rechunked whole. The second
+pass reads the frames again in slabs (`SLAB_BYTES`, whole frames: the cheapest reads) and adds up
+the DFT sums of each slab. Integer counts (decoded video, MRAW and TIFF frames, whose reads decode
+whole frames, so that each block's read decodes the whole recording) are read once and kept for
+the second pass when they fit in a quarter of `memory`; float cubes (netCDF, zarr, npy, read by
+hyperslab) are read again, which costs less than holding them.
 
 No equation of the paper is used here (the paper stops at the sensitivity, eq. 21; sec. 5 asks for
 combining pixels, which this map prepares).
@@ -64,9 +54,8 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import functools
+import itertools
 import logging
-import math
 import numbers
 import time
 from pathlib import Path
@@ -78,6 +67,20 @@ from threadpoolctl import threadpool_limits
 
 from vibinverse.errors import DataError, InputError
 from vibinverse.imaging.scheduler import session
+from vibinverse.imaging.whitening import (
+    TINY,
+    Floor,
+    FrequencyGrid,
+    corrected,
+    dft_basis,
+    dft_power,
+    dft_sums,
+    frequency_grid,
+    log_tail,
+    refine,
+    spectrum_rows,
+    whiten_rows,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -85,275 +88,78 @@ DEFAULT_MEMORY = 512 * 2**20  # bytes: the chunks in flight and their float64 wo
 # float64 work per pixel and time sample in a batch (series, spectra, floor), measured with tracemalloc:
 # 29 bytes with the rfft, 85 with nifty-ls (its oversampled NUFFT grid)
 WORK_BYTES_PER_SAMPLE = {True: 32, False: 96}  # keyed by uniform stamps
-FLOOR_HALF_WIDTH = 64  # h: the running median's window is 2h + 1 = 129 Fourier bins
-MIN_HALF_WIDTH = 8  # fewer Fourier frequencies than 2 * 8 + 1 (35 frames): too short a record
-BASELINE_DEGREE = 3  # the smooth baseline: a cubic in ln f fitted to ln P
-BASELINE_DENSE, BASELINE_STRIDE = 256, 4  # ... at the first 256 frequencies and every 4th after
-LOW_BINS = 4  # the first Fourier frequencies, never searched (drift)
 LINE_BINS = 1  # a pixel's SNR at a line: its largest z within this many bins of the line's bin
 MERGE_GAP = 2  # line frequencies at most 2 bins apart are one line (a damped resonance's hump dips between)
-# stamps within this fraction of a step from a uniform grid (a container's rounded stamps: 30 fps in
-# milliseconds is 1.5 %) take the rfft: its phase error, at most 2 pi 0.02 f / fs <= 0.063 rad, loses
-# < 0.4 % of a line's power
-UNIFORM_TOLERANCE = 0.02
 MIN_CHUNK_PIXELS = 64  # smaller blocks cost more in scheduling than they save
 BATCH_BYTES = 2**20  # float64 series per batch: ~1 MiB stays in a core's cache (2x faster than 8 MiB)
-
-
-# ----------------------------------------------------------------------------------- the frequencies
-@dataclasses.dataclass(frozen=True)
-class FrequencyGrid:
-    """The Fourier frequencies f = (i + 1) df, i = 0 .. n_freq - 1, of a record with stamps `time`;
-    the band searched is i in [lo, hi)."""
-
-    time: np.ndarray
-    uniform: bool
-    dt: float  # median step, s
-    df: float  # 1 / T, Hz
-    n_freq: int
-    lo: int
-    hi: int
-    half_width: int  # h of the floor's window
-
-    @property
-    def frequencies(self) -> np.ndarray:
-        return (np.arange(self.n_freq) + 1.0) * self.df
-
-    @property
-    def n_searched(self) -> int:
-        """M: the Fourier frequencies in the band (independent for white noise)."""
-        return self.hi - self.lo
-
-    @property
-    def nyquist(self) -> float:
-        return 0.5 / self.dt
-
-    @functools.cached_property
-    def windows(self) -> tuple[np.ndarray, np.ndarray]:
-        """(first bin of each floor window, the window each bin takes: the nearest centre, which
-        contains it). The windows tile the frequencies (the last one ends at the last frequency)."""
-        w = 2 * self.half_width + 1
-        starts = np.unique(np.r_[np.arange(0, self.n_freq - w + 1, w), self.n_freq - w])
-        centres = starts + self.half_width
-        j = np.arange(self.n_freq)
-        right = np.minimum(np.searchsorted(centres, j), centres.size - 1)  # centres[right - 1] < j <= centres[right]
-        left = np.maximum(right - 1, 0)
-        nearest = np.where(np.abs(centres[left] - j) <= np.abs(centres[right] - j), left, right)
-        return starts, nearest
-
-    @functools.cached_property
-    def baseline_basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(A, bins, pinv(A[bins])): the cubic in standardized ln f of the baseline at every
-        frequency, the frequencies it is fitted on (all the low ones, whose few bins fix the shape
-        at low f on the ln f axis, then every BASELINE_STRIDE-th), and the fit's least-squares inverse."""
-        x = np.log(np.arange(1, self.n_freq + 1, dtype=np.float64))
-        x = (x - x.mean()) / (x.std() or 1.0)
-        a = np.vander(x, BASELINE_DEGREE + 1)
-        bins = np.r_[
-            np.arange(min(BASELINE_DENSE, self.n_freq)), np.arange(BASELINE_DENSE, self.n_freq, BASELINE_STRIDE)
-        ]
-        return a, bins, np.linalg.pinv(a[bins])
-
-    @functools.cached_property
-    def ramp_spectrum(self) -> np.ndarray:
-        """rfft of the centred time ramp at the grid's frequencies (uniform stamps): what a unit
-        slope adds to each Fourier coefficient, so that the trend is removed from the spectrum."""
-        tc = self.time - self.time.mean()
-        return np.fft.rfft(tc)[1 : self.n_freq + 1]
-
-
-def frequency_grid(time: np.ndarray, band: tuple[float, float] | None = None) -> FrequencyGrid:
-    """The Fourier frequencies of stamps `time` (s) and the band searched (Hz, default: from the
-    (LOW_BINS+1)-th Fourier frequency up to Nyquist). One-line DataError/InputError naming the field."""
-    t = np.asarray(time, dtype=np.float64)
-    if t.ndim != 1 or not np.all(np.isfinite(t)):
-        raise DataError("time: stamps must be a finite 1-D coordinate, in seconds")
-    steps = np.diff(t)
-    if t.size < 2 or np.any(steps <= 0):
-        first = int(np.flatnonzero(steps <= 0)[0]) + 1 if t.size >= 2 else 0
-        raise DataError(f"time: stamps must increase strictly (index {first} does not)")
-    mean_step = float(t[-1] - t[0]) / (t.size - 1)
-    uniform = bool(np.max(np.abs(t - t[0] - mean_step * np.arange(t.size))) <= UNIFORM_TOLERANCE * mean_step)
-    dt = mean_step if uniform else float(np.median(steps))
-    span = t.size * dt if uniform else float(t[-1] - t[0]) + dt
-    n_freq = (t.size - 1) // 2 if uniform else math.floor(0.5 * span / dt + 1e-9) - 1
-    half = min(FLOOR_HALF_WIDTH, (n_freq - 1) // 2)
-    if half < MIN_HALF_WIDTH:  # (then n_freq >= 2 * MIN_HALF_WIDTH + 1 > LOW_BINS too)
-        need = 2 * (2 * MIN_HALF_WIDTH + 1) + 1
-        raise DataError(f"time: {t.size} frames are too few for a detection map (at least {need})")
-    df = 1.0 / span
-    lo, hi = LOW_BINS, n_freq
-    if band is not None:
-        fmin, fmax = (float(band[0]), float(band[1]))
-        fmax = 0.5 / dt if fmax == math.inf else fmax  # "5:" on the command line: up to Nyquist
-        allowed = f"0 <= fmin < fmax <= {0.5 / dt:.6g} Hz (Nyquist)"
-        if not (math.isfinite(fmin) and math.isfinite(fmax) and 0 <= fmin < fmax):
-            raise InputError(f"--band: {fmin:g}:{fmax:g} is not a band; allowed {allowed}")
-        if fmax > 0.5 / dt * (1 + 1e-9):
-            raise InputError(f"--band: fmax {fmax:g} Hz is above Nyquist; allowed {allowed}")
-        f = (np.arange(n_freq) + 1.0) * df
-        inside = np.flatnonzero((f >= fmin) & (f <= fmax) & (np.arange(n_freq) >= LOW_BINS))
-        if inside.size == 0:
-            raise InputError(
-                f"--band: no searched frequency in {fmin:g}:{fmax:g} Hz; the searched frequencies are "
-                f"{(LOW_BINS + 1) * df:.6g} to {n_freq * df:.6g} Hz in steps of {df:.6g} Hz"
-            )
-        lo, hi = int(inside[0]), int(inside[-1]) + 1
-    return FrequencyGrid(t, uniform, dt, df, n_freq, lo, hi, half)
-
-
-# ------------------------------------------------------------------------------------- the statistics
-def floor_constant(half_width: int) -> float:
-    """c = E[(h+1)-th smallest of 2h+1 Exp(1)] = H_{2h+1} - H_h (ln 2 as h grows)."""
-    h = int(half_width)
-    return float(np.sum(1.0 / (2 * h + 1 - np.arange(h + 1))))
-
-
-def log_tail(z: np.ndarray | float, half_width: int) -> np.ndarray:
-    """ln P(whitened power > z) for noise: prod_{i=0}^{h} (2h - i) / (2h - i + z / c) (module
-    docstring, item 4; exact for white noise when z / c >= 1, the range a p-value needs)."""
-    h = int(half_width)
-    s = np.maximum(np.asarray(z, dtype=np.float64), 0.0) / floor_constant(h)
-    out = np.zeros_like(s)
-    for i in range(h + 1):
-        out -= np.log1p(s / (2 * h - i))
-    return out
-
-
-def corrected(log_p: np.ndarray, trials: float) -> np.ndarray:
-    """1 - (1 - p)^trials with p = exp(log_p): the chance that the largest of `trials` independent
-    tests passes, computed stably as -expm1(trials * log1p(-p))."""
-    p = np.exp(np.asarray(log_p, dtype=np.float64))
-    with np.errstate(divide="ignore"):
-        return -np.expm1(trials * np.log1p(-np.minimum(p, 1.0)))
-
-
-def spectrum(y: np.ndarray, grid: FrequencyGrid) -> tuple[np.ndarray, np.ndarray]:
-    """(means (pixels,), powers (n_freq, pixels)) of float64 series y (time, pixels; overwritten on
-    irregular stamps) with their mean and least-squares line removed, at the grid's frequencies:
-    |sum y e^{-2 pi i f t}|^2 / N by scipy's rfft down the columns on uniform stamps (the mean only
-    touches f = 0; the line is taken out of the Fourier coefficients, `ramp_spectrum`), nifty-ls
-    Lomb-Scargle ("psd" normalization, floating mean) on irregular ones."""
-    import scipy.fft
-
-    n = y.shape[0]
-    tc = grid.time - grid.time.mean()
-    slope = (tc @ y) / float(tc @ tc)
-    if grid.uniform:
-        coef = scipy.fft.rfft(y, axis=0)
-        mean = coef[0].real / n
-        coef = coef[1 : grid.n_freq + 1]
-        coef -= grid.ramp_spectrum[:, None] * slope[None, :]
-        power = np.square(coef.real)
-        power += np.square(coef.imag)
-        power /= n
-        return mean, power
-    import nifty_ls
-
-    mean = y.mean(axis=0)
-    series = np.ascontiguousarray((y - mean[None, :] - tc[:, None] * slope[None, :]).T)
-    res = nifty_ls.lombscargle(
-        grid.time,
-        series,
-        fmin=grid.df,
-        fmax=grid.n_freq * grid.df,
-        Nf=grid.n_freq,
-        normalization="psd",
-        nthreads=1,  # dask's threads run the blocks in parallel
-    )
-    return mean, np.ascontiguousarray(np.asarray(res.power, dtype=np.float64).reshape(-1, grid.n_freq).T)
-
-
-def periodogram(y: np.ndarray, grid: FrequencyGrid) -> np.ndarray:
-    """Powers (n_freq, pixels) of series y (time, pixels) at the grid's frequencies, their mean and
-    least-squares line removed (`spectrum`)."""
-    series = np.asarray(y, dtype=np.float64)
-    return spectrum(np.array(series.reshape(series.shape[0], -1)), grid)[1]
-
-
-def whiten(power: np.ndarray, grid: FrequencyGrid, bins: np.ndarray | None = None) -> np.ndarray:
-    """Whitened powers z = P / floor (module docstring, item 3) of powers (n_freq, pixels), at all
-    frequencies or at `bins` only (indices into the grid: only their windows are computed);
-    (frequencies, pixels), 0 where a pixel has no power."""
-    h = grid.half_width
-    a, fitted, pinv = grid.baseline_basis
-    starts, nearest = grid.windows
-    log_p = np.maximum(power[fitted], np.finfo(np.float64).tiny)
-    np.log(log_p, out=log_p)
-    coef = pinv @ log_p  # the baseline: ln P ~ a @ coef
-    cols = np.arange(grid.n_freq) if bins is None else np.asarray(bins, dtype=np.int64)
-    z = np.empty((cols.size, power.shape[1]))
-    c = floor_constant(h)
-    for w in np.unique(nearest[cols]):  # window by window: small arrays, in cache
-        sl = slice(starts[w], starts[w] + 2 * h + 1)
-        ratio = a[sl] @ coef
-        np.negative(ratio, out=ratio)
-        np.exp(ratio, out=ratio)
-        ratio *= power[sl]  # P / baseline over the window
-        with np.errstate(divide="ignore"):
-            scale = c / np.partition(ratio, h, axis=0)[h]  # 1 / floor, in units of the baseline
-        sel = np.flatnonzero(nearest[cols] == w)
-        z[sel] = ratio[cols[sel] - starts[w]] * scale[None, :]
-    z[~np.isfinite(z)] = 0.0
-    return z
-
-
-def _refine(power: np.ndarray, idx: np.ndarray, n_freq: int) -> np.ndarray:
-    """Bin offsets in [-0.5, 0.5] of the parabola's vertex through ln P at idx - 1, idx, idx + 1
-    (power (n_freq, pixels), idx a bin per pixel)."""
-    i = np.clip(idx, 1, n_freq - 2)
-    cols = np.arange(idx.size)
-    tiny = np.finfo(np.float64).tiny
-    a, b, c = (np.log(np.maximum(power[i + d, cols], tiny)) for d in (-1, 0, 1))
-    den = a - 2 * b + c
-    with np.errstate(divide="ignore", invalid="ignore"):
-        delta = np.where(den < 0, 0.5 * (a - c) / den, 0.0)
-    delta = np.clip(np.nan_to_num(delta), -0.5, 0.5)
-    return np.where(i == idx, delta, 0.0)
+# a block's float64 series, and a slab of frames of the second pass (stored dtype), at most: each read
+# costs ~5 ms of fixed overhead through xarray and HDF5, and fresh pages cost too (measured, 64 x 64 x 4000)
+BLOCK_BYTES = 32 * 2**20
+SLAB_BYTES = 32 * 2**20
+SPLIT_EVERY = 4  # the second pass adds its slabs' sums 4 at a time
 
 
 # ---------------------------------------------------------------------------------- one chunk's work
-def _batches(block: np.ndarray, grid: FrequencyGrid, batch: int):
-    """(slice of the block's pixels, their means, their powers (n_freq, pixels)) for batches of
-    `batch` pixels."""
-    nt = block.shape[0]
-    flat = np.asarray(block).reshape(nt, -1)
-    for start in range(0, flat.shape[1], batch):
-        sl = slice(start, min(start + batch, flat.shape[1]))
-        y = flat[:, sl].astype(np.float64)
+def _batches(block: Any, grid: FrequencyGrid, batch: int):
+    """(slice of the block's pixels, their means, their powers in rows (pixels, n_freq)) for
+    batches of `batch` pixels of a block (time, y, x), given whole or as its time pieces (a list,
+    as read: each batch gathers its pixels' series from them, float64)."""
+    pieces = [np.asarray(p) for p in block] if isinstance(block, (list, tuple)) else [np.asarray(block)]
+    flats = [p.reshape(p.shape[0], -1) for p in pieces]
+    for start in range(0, flats[0].shape[1], batch):
+        sl = slice(start, min(start + batch, flats[0].shape[1]))
+        y = np.concatenate([f[:, sl] for f in flats], axis=0, dtype=np.float64)
+        if grid.uniform:  # a missing sample makes its column's sum (the rfft at f = 0) NaN: checked after
+            mean, power = spectrum_rows(y, grid)
+            if np.isfinite(mean).all():
+                yield sl, mean, power
+                continue
         bad = ~np.isfinite(y)
         if bad.any():  # missing samples: the pixel's mean; a pixel without samples: mean NaN, no power
             y[bad] = 0.0
             count = (~bad).sum(axis=0)
             fill = np.divide(y.sum(axis=0), count, out=np.zeros(y.shape[1]), where=count > 0)
             y[bad] = np.broadcast_to(fill[None, :], y.shape)[bad]
-            mean, power = spectrum(y, grid)
+            mean, power = spectrum_rows(y, grid)
             mean[count == 0] = np.nan
         else:
-            mean, power = spectrum(y, grid)
+            mean, power = spectrum_rows(y, grid)
         yield sl, mean, power
 
 
-def first_pass(block: np.ndarray, grid: FrequencyGrid, batch: int) -> dict[str, np.ndarray]:
-    """A block (time, y, x) -> its maps (peak bin, peak frequency, peak SNR, mean frame; (y, x))
-    and the largest z over its pixels at each frequency of the band."""
-    _, ny, nx = block.shape
+def _refined(power: np.ndarray, idx: np.ndarray, n_freq: int) -> np.ndarray:
+    """Bin offsets of the peaks at bins idx (one per row of power (pixels, n_freq)): `refine`
+    through ln P at idx - 1, idx, idx + 1; 0 at the first and last frequencies."""
+    i = np.clip(idx, 1, n_freq - 2)
+    rows = np.arange(idx.size)
+    log_p = np.log(np.maximum(np.stack([power[rows, i + d] for d in (-1, 0, 1)]), TINY))
+    return np.where(i == idx, refine(log_p), 0.0)
+
+
+def first_pass(block: Any, grid: FrequencyGrid, batch: int) -> dict[str, Any]:
+    """A block (time, y, x; or its time pieces, a list) -> its maps (peak bin, peak frequency,
+    peak SNR, mean frame; (y, x)), the largest z over its pixels at each frequency of the band, and
+    its pixels' floors ("floor", a `Floor` over the block's pixels, for the second pass)."""
+    ny, nx = (block[0] if isinstance(block, (list, tuple)) else block).shape[1:]
     npix = ny * nx
     peak_bin = np.zeros(npix, dtype=np.int64)
     peak_f = np.zeros(npix)
     peak_z = np.zeros(npix)
     mean = np.zeros(npix)
+    coef, scale = np.zeros((npix, grid.baseline_basis[0].shape[1])), np.zeros((npix, grid.windows[0].size))
     zmax = np.zeros(grid.n_searched)
     band = np.arange(grid.lo, grid.hi)
     for sl, m, power in _batches(block, grid, batch):
-        z = whiten(power, grid, band)
-        k = np.argmax(z, axis=0)
+        z, floor = whiten_rows(power, grid, band)
+        rows = np.arange(z.shape[0])
+        k = np.argmax(z, axis=1)
         idx = k + grid.lo
         peak_bin[sl] = idx
-        peak_z[sl] = z[k, np.arange(k.size)]
-        peak_f[sl] = (idx + 1 + _refine(power, idx, grid.n_freq)) * grid.df
+        peak_z[sl] = z[rows, k]
+        peak_f[sl] = (idx + 1 + _refined(power, idx, grid.n_freq)) * grid.df
         mean[sl] = m
-        np.maximum(zmax, z.max(axis=1), out=zmax)
+        coef[sl], scale[sl] = floor.coef, floor.scale
+        np.maximum(zmax, z.max(axis=0), out=zmax)
     shape = (ny, nx)
     return {
         "peak_bin": peak_bin.reshape(shape),
@@ -361,26 +167,82 @@ def first_pass(block: np.ndarray, grid: FrequencyGrid, batch: int) -> dict[str, 
         "peak_snr": peak_z.reshape(shape),
         "mean_frame": mean.reshape(shape),
         "band_max": zmax,
+        "floor": Floor(coef, scale),
     }
 
 
-def line_pass(block: np.ndarray, grid: FrequencyGrid, bins: tuple[int, ...], batch: int) -> dict[str, np.ndarray]:
-    """A block -> per line (of Fourier bin `bins[l]`): each pixel's largest z within LINE_BINS of
-    it ("snr") and the refined frequency there ("frequency"), arrays (line, y, x)."""
-    _, ny, nx = block.shape
-    snr = np.zeros((len(bins), ny * nx))
-    freq = np.zeros((len(bins), ny * nx))
+def line_bins(grid: FrequencyGrid, bins: tuple[int, ...]) -> tuple[list[np.ndarray], np.ndarray]:
+    """([the searched bins within LINE_BINS of each line's bin], every bin whose power the line
+    pass needs: those and their neighbours, for the refined frequency)."""
     near = [np.arange(max(grid.lo, b - LINE_BINS), min(grid.hi, b + LINE_BINS + 1)) for b in bins]
-    cols = np.unique(np.concatenate(near))
-    for sl, _, power in _batches(block, grid, batch):
-        z = whiten(power, grid, cols)
-        for k, nb in enumerate(near):
-            zk = z[np.searchsorted(cols, nb)]
-            j = np.argmax(zk, axis=0)
-            idx = nb[j]
-            snr[k, sl] = zk[j, np.arange(j.size)]
-            freq[k, sl] = (idx + 1 + _refine(power, idx, grid.n_freq)) * grid.df
-    return {"snr": snr.reshape(len(bins), ny, nx), "frequency": freq.reshape(len(bins), ny, nx)}
+    cols = np.unique(np.concatenate([np.r_[nb, nb - 1, nb + 1] for nb in near]))
+    return near, cols[(cols >= 0) & (cols < grid.n_freq)]
+
+
+def line_powers(block: Any, grid: FrequencyGrid, cols: np.ndarray, batch: int, mean: np.ndarray) -> np.ndarray:
+    """A block (time, y, x) -> its pixels' powers (pixels, K) at the grid's K bins `cols`: by the
+    DFT at those bins alone on uniform stamps (`dft_sums`, less the first pass's means `mean`),
+    the periodogram's columns on irregular ones."""
+    block = _whole(block)
+    nt = block.shape[0]
+    flat = block.reshape(nt, -1)
+    power = np.zeros((flat.shape[1], cols.size))
+    if grid.uniform:
+        basis = dft_basis(grid, cols)
+        for start in range(0, flat.shape[1], batch):
+            sl = slice(start, min(start + batch, flat.shape[1]))
+            power[sl] = dft_power(dft_sums(flat[:, sl], mean[sl], basis), grid, cols)
+    else:
+        for sl, _, p in _batches(block, grid, batch):
+            power[sl] = p[:, cols]
+    return power
+
+
+def slab_sums(
+    slab: np.ndarray, frames: slice, grid: FrequencyGrid, cols: np.ndarray, mean: np.ndarray, batch: int
+) -> np.ndarray:
+    """The `dft_sums` (2 K + 1, y, x) at the grid's bins `cols` of a slab of frames (frames, y, x),
+    the samples `frames` of the record, less the pixels' means `mean` (y, x): summed over the slabs,
+    the record's (uniform stamps)."""
+    basis = dft_basis(grid, cols, frames)
+    nt, ny, nx = slab.shape
+    flat, m = slab.reshape(nt, -1), mean.ravel()
+    sums = np.empty((basis.shape[1], flat.shape[1]))
+    step = max(batch, BATCH_BYTES // (8 * nt))
+    for start in range(0, flat.shape[1], step):
+        sl = slice(start, min(start + step, flat.shape[1]))
+        sums[:, sl] = dft_sums(flat[:, sl], m[sl], basis)
+    return sums.reshape(-1, ny, nx)
+
+
+def line_maps(
+    power: np.ndarray, floor: Floor, grid: FrequencyGrid, bins: tuple[int, ...]
+) -> tuple[np.ndarray, np.ndarray]:
+    """(snr, frequency) (line, pixels) from the pixels' powers (pixels, K) at `line_bins`' bins and
+    their floors: per line, each pixel's largest z within LINE_BINS of the line's bin and the
+    frequency there, refined by the parabola through ln P at it and its neighbours."""
+    near, cols = line_bins(grid, bins)
+    z = floor.whiten(power, grid, cols)
+    log_p = np.log(np.maximum(power, TINY))
+    rows = np.arange(z.shape[0])
+    snr = np.zeros((len(bins), rows.size))
+    freq = np.zeros((len(bins), rows.size))
+    for k, nb in enumerate(near):
+        at = np.searchsorted(cols, nb)
+        j = np.argmax(z[:, at], axis=1)
+        idx = nb[j]
+        snr[k] = z[rows, at[j]]
+        inner = (idx >= 1) & (idx <= grid.n_freq - 2)  # else no parabola: the bin's own frequency
+        around = [log_p[rows, np.searchsorted(cols, np.clip(idx + d, 0, grid.n_freq - 1))] for d in (-1, 0, 1)]
+        freq[k] = (idx + 1 + np.where(inner, refine(np.stack(around)), 0.0)) * grid.df
+    return snr, freq
+
+
+def _whole(block: Any) -> np.ndarray:
+    """A block given whole or as its time pieces (a list, as read), whole."""
+    if isinstance(block, (list, tuple)):
+        return block[0] if len(block) == 1 else np.concatenate(block, axis=0)
+    return np.asarray(block)
 
 
 # ------------------------------------------------------------------------------------------- chunks
@@ -391,15 +253,16 @@ class ChunkPlan:
     block_y: int
     block_x: int
     batch: int  # pixels per float64 batch
-    keep: bool  # read the cube once and keep it for the second pass
+    keep: bool  # the cube fits in a quarter of the memory: it may be read once and kept for the second pass
 
 
 def plan_chunks(
     shape: tuple[int, int, int], itemsize: int, threads: int, memory: int, uniform: bool = True
 ) -> ChunkPlan:
     """Blocks so that `threads` blocks in flight (stored dtype, x2 while assembled from their time
-    pieces) plus their float64 batches (WORK_BYTES_PER_SAMPLE per sample) fit in `memory` bytes.
-    A cube of at most a quarter of `memory` is kept in memory between the two passes."""
+    pieces) plus their float64 batches (WORK_BYTES_PER_SAMPLE per sample) fit in `memory` bytes,
+    each block of at most BLOCK_BYTES of float64 series. A cube of at most a quarter of `memory`
+    may be kept in memory between the two passes (`keep`)."""
     from dask.utils import format_bytes
 
     nt, ny, nx = (int(s) for s in shape)
@@ -419,6 +282,7 @@ def plan_chunks(
     total = ny * nx
     if total >= 2 * threads * MIN_CHUNK_PIXELS:  # at least two blocks per thread: balanced work
         pixels = min(pixels, max(MIN_CHUNK_PIXELS, -(-total // (2 * threads))))
+    pixels = min(pixels, max(MIN_CHUNK_PIXELS, batch, BLOCK_BYTES // (8 * nt)))
     pixels = min(pixels, total)
     block_y, block_x = (min(ny, pixels // nx), nx) if pixels >= nx else (1, pixels)
     return ChunkPlan(block_y, block_x, min(batch, block_y * block_x), keep)
@@ -428,30 +292,53 @@ def _boundaries(chunks: tuple[int, ...]) -> set[int]:
     return set(np.cumsum((0, *chunks)).tolist())
 
 
-def blocks_of(data: Any, plan: ChunkPlan) -> list[tuple[slice, slice, Any]]:
-    """(y slice, x slice, dask array (time, y, x)) of every block of the plan, from a dask array.
-
-    When every source chunk lies inside one block, or the cube is kept in memory anyway, the blocks
-    are a rechunk of the source. Otherwise (frames split in time pieces that span many blocks, as
-    video and netCDF read by frames) a rechunk would hold every piece until the last block used it:
-    the whole cube. There each block reads its own pixels of every piece in tasks of its own
-    (`dask.graph_manipulation.clone`; dask fuses the slice into the read where the source allows),
-    so only the blocks in flight are held."""
-    from dask.graph_manipulation import clone
-
-    _, ny, nx = data.shape
-    cuts = [
+def _cuts(shape: tuple[int, ...], plan: ChunkPlan) -> list[tuple[slice, slice]]:
+    _, ny, nx = shape
+    return [
         (slice(y, min(y + plan.block_y, ny)), slice(x, min(x + plan.block_x, nx)))
         for y in range(0, ny, plan.block_y)
         for x in range(0, nx, plan.block_x)
     ]
+
+
+def aligned(data: Any, plan: ChunkPlan) -> bool:
+    """Whether every chunk of the dask array `data` (time, y, x) lies inside one block of the plan."""
+    cuts = _cuts(data.shape, plan)
     edges_y = {s.stop for s, _ in cuts} | {0}
     edges_x = {s.stop for _, s in cuts} | {0}
-    aligned = edges_y <= _boundaries(data.chunks[1]) and edges_x <= _boundaries(data.chunks[2])
-    if aligned or plan.keep:
-        whole = data.rechunk((-1, plan.block_y, plan.block_x))
+    return edges_y <= _boundaries(data.chunks[1]) and edges_x <= _boundaries(data.chunks[2])
+
+
+def blocks_of(data: Any, plan: ChunkPlan) -> list[tuple[slice, slice, Any]]:
+    """(y slice, x slice, dask array (time, y, x), one chunk in y and x) of every block of the plan,
+    from a dask array.
+
+    When every source chunk lies inside one block, or the cube is kept in memory anyway, the blocks
+    are a rechunk of the source (whole). Otherwise (frames split in time pieces that span many
+    blocks, as video and netCDF read by frames) a rechunk would hold every piece until the last
+    block used it: the whole cube. There each block reads its own pixels of every piece in tasks of
+    its own (`dask.graph_manipulation.clone`; dask fuses the slice into the read where the source
+    allows), so only the blocks in flight are held; its time pieces are left as read (the first
+    pass gathers each batch's series from them: no copy of the whole block)."""
+    from dask.graph_manipulation import clone
+
+    cuts = _cuts(data.shape, plan)
+    # (method "tasks": dask's default choice would import distributed to look for a client)
+    if aligned(data, plan) or plan.keep:
+        whole = data.rechunk((-1, plan.block_y, plan.block_x), method="tasks")
         return [(ys, xs, whole[:, ys, xs]) for ys, xs in cuts]
-    return [(ys, xs, clone(data, seed=k)[:, ys, xs].rechunk((-1, -1, -1))) for k, (ys, xs) in enumerate(cuts)]
+    out = []
+    for k, (ys, xs) in enumerate(cuts):
+        block = clone(data, seed=k)[:, ys, xs]
+        if len(block.chunks[1]) > 1 or len(block.chunks[2]) > 1:
+            block = block.rechunk({1: -1, 2: -1}, method="tasks")
+        out.append((ys, xs, block))
+    return out
+
+
+def _pieces(block: Any) -> list[Any]:
+    """The time pieces (dask.delayed, in time order) of a block of `blocks_of`."""
+    return block.to_delayed().ravel().tolist()
 
 
 # ------------------------------------------------------------------------------------------ results
@@ -712,6 +599,9 @@ def detection_map(
             data = cube.chunk({"time": -1, "y": plan.block_y, "x": plan.block_x}).data
         else:
             data = cube.data
+        # kept: integer counts (decoded frames) read in pieces that span several blocks (module docstring)
+        keep = plan.keep and np.issubdtype(cube.dtype, np.integer) and not aligned(data, plan)
+        plan = dataclasses.replace(plan, keep=bool(keep))
         blocks = blocks_of(data, plan)
         logger.debug(f"detect: {len(blocks)} blocks of {plan.block_y} x {plan.block_x} pixels, batches of {plan.batch}")
         clock = time.perf_counter()
@@ -719,27 +609,30 @@ def detection_map(
             arrays = run.persist(*[b for _, _, b in blocks])
             blocks = [(ys, xs, a) for (ys, xs, _), a in zip(blocks, arrays)]
             logger.debug(f"detect: cube read and kept in {time.perf_counter() - clock:.2f} s")
-        first = run.compute(*[_delayed(first_pass)(b, grid, plan.batch) for _, _, b in blocks])
+        first = run.compute(*[_delayed(first_pass)(_pieces(b), grid, plan.batch) for _, _, b in blocks])
         logger.debug(f"detect: first pass (peaks) {time.perf_counter() - clock:.2f} s")
         maps = {
             k: np.zeros((ny, nx), dtype=first[0][k].dtype)
             for k in ("peak_bin", "peak_frequency", "peak_snr", "mean_frame")
         }
+        coef = np.zeros((ny, nx, first[0]["floor"].coef.shape[1]))
+        scale = np.zeros((ny, nx, first[0]["floor"].scale.shape[1]))
         band_max = np.zeros(grid.n_searched)
         for (ys, xs, _), part in zip(blocks, first):
             for k in maps:
                 maps[k][ys, xs] = part[k]
+            coef[ys, xs] = part["floor"].coef.reshape(*part["mean_frame"].shape, -1)
+            scale[ys, xs] = part["floor"].scale.reshape(*part["mean_frame"].shape, -1)
             np.maximum(band_max, part["band_max"], out=band_max)
         runs = _lines_of(band_max, grid, n_pixels, float(alpha), max_lines)
         bins = tuple(r[0] for r in runs)
         snr = np.zeros((len(bins), ny, nx))
         freq = np.zeros((len(bins), ny, nx))
         if bins:
-            second = run.compute(*[_delayed(line_pass)(b, grid, bins, plan.batch) for _, _, b in blocks])
+            power = _line_powers(run, data, blocks, grid, line_bins(grid, bins)[1], plan, maps["mean_frame"], memory)
+            floor = Floor(coef.reshape(n_pixels, -1), scale.reshape(n_pixels, -1))
+            snr, freq = (m.reshape(len(bins), ny, nx) for m in line_maps(power, floor, grid, bins))
             logger.debug(f"detect: second pass (SNR maps of {len(bins)} lines) {time.perf_counter() - clock:.2f} s")
-            for (ys, xs, _), part in zip(blocks, second):
-                snr[:, ys, xs] = part["snr"]
-                freq[:, ys, xs] = part["frequency"]
     log_p = log_tail(maps["peak_snr"], grid.half_width)
     pixel_fap = corrected(log_p, grid.n_searched)
     fap = corrected(log_p, grid.n_searched * n_pixels)
@@ -755,6 +648,53 @@ def detection_map(
         f"{grid.frequencies[grid.hi - 1]:.4g} Hz): {len(lines)} line(s), {len(masks)} cluster(s)"
     )
     return DetectionMap(ds, lines)
+
+
+def _line_powers(run, data, blocks, grid, cols, plan, mean_frame, memory) -> np.ndarray:
+    """Every pixel's powers (pixels, K) at the grid's bins `cols`: on uniform stamps, unless the
+    cube is kept or the sums would not fit, by `slab_sums` over slabs of whole frames, each read
+    once in tasks of its own (dask fuses the slice into the read: contiguous frames are the
+    cheapest reads), added up SPLIT_EVERY at a time; else block by block (`line_powers`)."""
+    from dask.graph_manipulation import clone
+
+    _, ny, nx = data.shape
+    k2 = 2 * cols.size + 1
+    itemsize = data.dtype.itemsize
+    frames = max(-(-k2 * 8 // itemsize), int(min(SLAB_BYTES, memory / (4 * run.threads)) // (itemsize * ny * nx)))
+    cuts = np.cumsum((0, *data.chunks[0]))
+    edges = sorted(
+        {
+            int(e)
+            for t0, t1 in itertools.pairwise(cuts)
+            for e in np.linspace(t0, t1, -(-(t1 - t0) // frames) + 1).round()
+        }
+    )
+    # held at worst: every slab's sums (dask may read the slabs ahead of the adds), and per thread a
+    # slab as read, its copy and its float64 batches
+    held = (len(edges) - 1) * k2 * ny * nx * 8 + 3 * run.threads * frames * ny * nx * max(itemsize, 8)
+    if grid.uniform and not plan.keep and held <= memory / 2:
+        parts = [
+            _delayed(slab_sums)(clone(data, seed=i)[t0:t1], slice(t0, t1), grid, cols, mean_frame, plan.batch)
+            for i, (t0, t1) in enumerate(itertools.pairwise(edges))
+        ]
+        while len(parts) > 1:
+            parts = [_delayed(_add)(*parts[i : i + SPLIT_EVERY]) for i in range(0, len(parts), SPLIT_EVERY)]
+        (total,) = run.compute(parts[0])
+        return dft_power(total.reshape(k2, -1), grid, cols)
+    parts = run.compute(
+        *[_delayed(line_powers)(_pieces(b), grid, cols, plan.batch, mean_frame[ys, xs].ravel()) for ys, xs, b in blocks]
+    )
+    power = np.zeros((ny, nx, cols.size))
+    for (ys, xs, _), p in zip(blocks, parts):
+        power[ys, xs] = p.reshape(power[ys, xs].shape)
+    return power.reshape(ny * nx, -1)
+
+
+def _add(*arrays: np.ndarray) -> np.ndarray:
+    total = arrays[0].copy()
+    for a in arrays[1:]:
+        total += a
+    return total
 
 
 def _delayed(fn):
@@ -776,7 +716,9 @@ def _make_lines(runs, grid, snr, freq, carries, cluster, masks) -> list[Line]:
                 n, centroid, bbox = _region(sel)
                 vals = snr[k][sel]
                 parts.append(LineCluster(k, cid, n, centroid, bbox, float(vals.mean()), float(vals.max())))
-        lines.append(Line(k, f, float((b + 1) * grid.df), zmax, fap, int(member.sum()), tuple(parts)))
+        # the line's SNR: its SNR map's largest (zmax to rounding: the map comes from the second pass)
+        top = float(snr[k].max()) if snr[k].size else zmax
+        lines.append(Line(k, f, float((b + 1) * grid.df), top, fap, int(member.sum()), tuple(parts)))
     return lines
 
 

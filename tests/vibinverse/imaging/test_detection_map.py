@@ -19,17 +19,8 @@ from scipy import stats
 from scipy.signal import lfilter
 
 from vibinverse.errors import DataError, InputError
-from vibinverse.imaging.detection_map import (
-    LOW_BINS,
-    WORK_BYTES_PER_SAMPLE,
-    corrected,
-    detection_map,
-    floor_constant,
-    frequency_grid,
-    log_tail,
-    plan_chunks,
-    whiten,
-)
+from vibinverse.imaging.detection_map import WORK_BYTES_PER_SAMPLE, detection_map, plan_chunks
+from vibinverse.imaging.whitening import frequency_grid, periodogram, whiten
 
 FS = 100.0  # Hz
 F0 = 12.34  # Hz: 126.4 bins of 1024 samples at 100 Hz, between two Fourier frequencies (the worst case)
@@ -51,44 +42,6 @@ def block_mask(shape, block=BLOCK):
     m = np.zeros(shape, dtype=bool)
     m[block] = True
     return m
-
-
-# ----------------------------------------------------------------------------------- the statistics
-def test_the_tail_of_the_whitened_power_is_exact_for_white_noise():
-    """z = P / (median of the 2h+1 powers around it / c): Monte Carlo against log_tail."""
-    rng = np.random.default_rng(1)
-    h, n = 8, 400_000
-    window = rng.exponential(size=(n, 2 * h + 1))
-    z = window[:, h] / (np.median(window, axis=1) / floor_constant(h))
-    for s in (2.0, 5.0, 9.0):
-        p = math.exp(log_tail(s, h))
-        sd = math.sqrt(p * (1 - p) / n)
-        assert abs(np.mean(z > s) - p) < 4 * sd, s  # binomial error, 4 sigma
-
-
-@given(st.floats(0, 200), st.floats(0, 200), st.integers(8, 300))
-def test_log_tail_is_a_survival_function_near_exp1(z1, z2, h):
-    lo, hi = sorted((z1, z2))
-    a, b = float(log_tail(lo, h)), float(log_tail(hi, h))
-    assert b <= a <= 0.0  # a survival function
-    # log1p(x) <= x: never lighter than exp(-r z), r = E[(h+1)-th of 2h Exp(1)] / c = 1 + O(1/h)
-    r = float(np.sum(1.0 / (2 * h - np.arange(h + 1)))) / floor_constant(h)
-    assert 1.0 < r < 1.0 + 1.0 / h and b >= -r * hi - 1e-9
-
-
-def test_log_tail_tends_to_exp1_for_wide_windows():
-    assert float(log_tail(24.0, 64)) == pytest.approx(-20.52, abs=0.01)  # the docstring's ~30x e^-24 at h = 64
-    assert float(log_tail(24.0, 100_000)) == pytest.approx(-24.0, abs=0.01)
-
-
-@given(st.floats(-700, 0), st.floats(1, 1e9))
-def test_corrected_is_the_chance_that_the_largest_of_n_tests_passes(log_p, n):
-    p = math.exp(log_p)
-    q = float(corrected(log_p, n))
-    assert 0.0 <= q <= min(1.0, n * p) * (1 + 1e-9)  # Bonferroni bounds it
-    assert q >= p * (1 - 1e-9)  # one test at least
-    if n * p < 1e-6:
-        assert q == pytest.approx(n * p, rel=1e-5)  # stable where 1 - (1 - p)^n would round to 0
 
 
 # ----------------------------------------------------------------------------- noise: no false line
@@ -258,12 +211,28 @@ def test_row_offset_changes_nothing():
         assert np.array_equal(a[name].values, b[name].values), name
 
 
-def test_whitening_is_the_same_on_all_bins_or_some():
-    rng = np.random.default_rng(10)
-    grid = frequency_grid(np.arange(2000) / FS)
-    power = rng.exponential(size=(grid.n_freq, 5)) * np.linspace(1, 30, grid.n_freq)[:, None]
-    bins = np.array([LOW_BINS, 400, 401, 990])
-    assert np.array_equal(whiten(power, grid)[bins], whiten(power, grid, bins))
+def test_the_snr_maps_are_the_whitened_periodogram_at_the_lines_whichever_second_pass():
+    """The second pass's SNR map, by slabs of frames (float cube in memory) or by kept blocks (8-bit
+    counts read in time pieces), is each pixel's largest whitened power within one bin of the line,
+    as the whole computation (periodogram, then whitening) gives it: the same sums in another order
+    (rounding, < 1e-9)."""
+    rng = np.random.default_rng(15)
+    nt, ny, nx = 1024, 12, 20
+    t = np.arange(nt) / FS
+    analog = with_line(rng, 100 + 0.8 * rng.standard_normal((nt, ny, nx)), t, 1.0, (slice(2, 6), slice(3, 8)))
+    counts = np.clip(np.round(analog), 0, 255).astype(np.uint8)
+    grid = frequency_grid(t)
+    z = whiten(periodogram(counts, grid), grid).reshape(grid.n_freq, ny, nx)
+    maps = [
+        detection_map(cube_of(counts.astype(np.float64), t), workers=2),  # aligned blocks: slabs
+        detection_map(cube_of(da.from_array(counts, chunks=(100, ny, nx)), t), workers=2),  # kept blocks
+    ]
+    for result in maps:
+        (line,) = result.lines
+        b = round(line.bin_frequency / grid.df) - 1
+        np.testing.assert_allclose(result.maps["snr"].values[0], z[b - 1 : b + 2].max(axis=0), rtol=1e-9)
+        assert line.snr == result.maps["snr"].values[0].max()
+    np.testing.assert_allclose(maps[0].maps["peak_frequency"].values, maps[1].maps["peak_frequency"].values, rtol=1e-12)
 
 
 # ------------------------------------------------------------------------------ chunks and memory
@@ -335,7 +304,7 @@ def test_a_cube_several_times_the_memory_given_is_processed(tmp_path):
     """A 256 MiB float32 cube (its float64 copy: 512 MiB) read from netCDF by a process whose data
     segment may grow by 64 MiB only (RLIMIT_DATA over the measured baseline): it runs, and its maps
     equal those of an unlimited run on a subset of rows. The same limit stops a run told it has
-    2 GiB (which keeps the cube in memory), so the limit does bind."""
+    2 GiB (whose blocks and slabs, sized for it, do not fit), so the limit does bind."""
     rng = np.random.default_rng(12)
     nt, ny, nx = 4096, 128, 128
     t = np.arange(nt) / 200.0
@@ -366,7 +335,8 @@ def test_a_cube_several_times_the_memory_given_is_processed(tmp_path):
         np.testing.assert_allclose(limited[name][rows], subset.maps[name].values, rtol=1e-12, err_msg=name)
     assert np.array_equal(limited["cluster"] == 1, block_mask((ny, nx), block))
     r, _ = run(2**31)
-    assert r.returncode != 0 and "MemoryError" in r.stderr  # the limit binds
+    # the limit binds: numpy's MemoryError, or OpenBLAS's when its buffers are what no longer fit
+    assert r.returncode != 0 and ("MemoryError" in r.stderr or "Memory allocation" in r.stderr), r.stderr[-500:]
 
 
 # ------------------------------------------------------------------------------------- bad inputs
