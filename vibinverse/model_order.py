@@ -8,25 +8,25 @@ Greedy forward selection by the Bayesian information criterion
 It starts from white noise plus a level. At each step it looks at the spectrum of the current
 model's standardized one-step residuals (innovations: white where the model describes the data; on
 irregular stamps a Lomb-Scargle periodogram at the stamps themselves) and proposes, at its strongest
-peak, a resonance (the peak of the smoothed residual spectrum) and a line (its highest bin), plus
-each nuisance term not yet in the model, and the broadest mode split in two when its damping
-ratio exceeds 0.05 (`split_candidates`: two close modes fitted as one hump leave no residual peak): a random-walk
-drift, AR(1) noise, 1/f noise, a gain drift (started along the least-squares fit of its cosines to
-the level's relative change, `gain_candidate`). A nuisance term is first screened on a grid of starting values (one
-likelihood each) and dropped when no point of the grid gains. Each candidate is then fitted with
-only its new parameters, the level and the white noise free (the rest held at the current optimum:
-cheap, and a lower bound on its likelihood gain); the best `REFIT_TOP` of them (by that partial
-BIC, when within 0.5 ln n of lowering it) are refitted with every parameter free, by maximum
-likelihood inside the priors' support (the MAP under flat priors), in the Posterior's unconstrained
-space (L-BFGS-B with finite-difference gradients, each coordinate scaled by its curvature; a new
-mode from two damping starts). The candidate that lowers the BIC most is kept. When no addition
-lowers it, backward and exchange moves are tried the same way (each mode, line, drift or coloured
-noise removed; AR(1) and 1/f exchanged; a coloured noise and a random-walk drift exchanged; an
-additive drift and a gain drift exchanged, both of which explain a changing level): the
-greedy forward step may take a heavily damped low-frequency mode, or a slow AR(1), for what is
-AR(1) noise, or a drift, and the stepwise search undoes it. The search stops when no move lowers
-the BIC, or at the caps (6 modes, 6 lines). A component the user fixes (`modes`, `lines`, `drift`,
-`noise` or `gain` in the `modal` table) is not searched.
+peak, a resonance (the peak of the smoothed residual spectrum) and a line (its highest bin); the
+broadest mode split in two when its damping ratio exceeds 0.05 (`split_candidates`: two close modes
+fitted as one hump leave no residual peak); and each nuisance term not yet in the model: a random-
+walk drift, AR(1) noise, 1/f noise, a gain drift (started along the least-squares fit of its cosines
+to the level's relative change, `gain_candidate`). A nuisance term is first screened on a grid of
+starting values (one likelihood each) and dropped when no point of the grid gains. Each candidate is
+then fitted with only its new parameters, the level and the white noise free (the rest held at the
+current optimum: cheap, and a lower bound on its likelihood gain); the best `REFIT_TOP` of them (by
+that partial BIC, when within 0.5 ln n of lowering it) are refitted with every parameter free, by
+maximum likelihood inside the priors' support (the MAP under flat priors), in the Posterior's
+unconstrained space (L-BFGS-B with finite-difference gradients, each coordinate scaled by its
+curvature; a new mode from two damping starts). The candidate that lowers the BIC most is kept. When
+no addition lowers it, backward and exchange moves are tried the same way (each mode, line, drift or
+coloured noise removed; AR(1) and 1/f exchanged; a coloured noise and a random-walk drift exchanged;
+an additive drift and a gain drift exchanged, both of which explain a changing level): the greedy
+forward step may take a heavily damped low-frequency mode, or a slow AR(1), for what is AR(1) noise,
+or a drift, and the stepwise search undoes it. The search stops when no move lowers the BIC, or at
+the caps (6 modes, 6 lines). A component the user fixes (`modes`, `lines`, `drift`, `noise` or
+`gain` in the `modal` table) is not searched.
 
 Why BIC: it is a consistent criterion for the order (the probability of choosing the true order
 goes to 1 as n grows, where AIC keeps a fixed chance of adding spurious components), and its
