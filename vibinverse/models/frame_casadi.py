@@ -8,7 +8,9 @@ checks that they agree to 1e-9), written in casadi expressions:
 - the modal -> physical map k1 = M w^2 / 12, b1 = M zeta w / 6 of `FrameParameters.from_modal`;
 - the drive's steady state H(i w) at the stamps, and the closed-form discretization of a damped
   oscillator under continuous white noise (`vibinverse.kalman.oscillator_tables`, underdamped);
-- the Kalman recursion as one casadi step Function unrolled over the series by `mapaccum`.
+- the Kalman recursion as one casadi step Function unrolled over the series by `mapaccum`, on the
+  two states of the one oscillator the pixel sees (both tilt modes are the same oscillator, so what
+  the pixel sees of them is that oscillator under the summed noise intensities: `_tilt_blocks`).
 
 Irregular stamps: the discretization is one casadi Function mapped over the distinct steps, and
 each Kalman step takes its step's (Phi, Q) by column (`FrameModel`'s step table and index).
@@ -126,11 +128,11 @@ class CasadiFrameObjective:
             if "noise.sigma" in values
             else (get_value(self.like.base, "noise.sigma") if "noise" in self.like.base else 0.0)
         )  # as FrameLikelihood
-        phi2, q2, kappas, p0 = self._tilt_blocks(w, zeta, k1, rms)
+        phi2, q2, kappa, a = self._tilt_blocks(w, zeta, k1, rms)
         # the data enter as a parameter, so that one compiled solver serves many series of one design
         y = ca.MX.sym("y", self.like.t.size)
         mask = ca.MX.sym("mask", self.like.t.size)
-        ll = self._kalman(y - mean, mask, phi2, q2, kappas, sigma * sigma, p0)
+        ll = self._kalman(y - mean, mask, phi2, q2, kappa, sigma * sigma, a, w)
         return ca.Function("neg_log_post", [z, y, mask], [-(log_prior + ll)])
 
     def data(self, series=None) -> ca.DM:
@@ -146,7 +148,16 @@ class CasadiFrameObjective:
 
     def _tilt_blocks(self, w, zeta, k1, rms):
         """Per Kalman step (columns; one column on a uniform grid) the unit-intensity (Phi, Q) of the
-        tilt oscillator as 4-vectors, each seen mode's noise intensity, and the stationary P0."""
+        tilt oscillator as 4-vectors, and the noise intensity of what the pixel sees of it.
+
+        Both tilt modes are one oscillator (w^2 = 12 k1 / M and zeta whatever the roof's extents,
+        `FrameParameters.from_modal`), driven by independent white noises of intensities kappa_b, and
+        the pixel sees sum_b h_b q_b. That sum is itself that oscillator driven by white noise of
+        intensity sum_b h_b^2 kappa_b (its state sum_b h_b x_b has the same Phi, noise covariance
+        sum_b h_b^2 kappa_b Q and stationary start), so the filter runs on 2 states instead of 4 with
+        the same likelihood (the numpy `FrameModel` keeps the 4; a test checks they agree to 1e-10),
+        and each exact Hessian IPOPT needs costs ~20 % less (casadi's evaluation of the recursion's
+        derivatives, not the arithmetic of a step, takes most of it)."""
         like = self.like
         a = zeta * w
         disc = _oscillator_step()
@@ -158,44 +169,39 @@ class CasadiFrameObjective:
             phi2, q2 = phi_u[:, cols.tolist()], q_u[:, cols.tolist()]
         else:
             phi2, q2 = disc(w, a, like.dt)
-        kappas = []
-        p0 = ca.MX.zeros(2 * len(self.seen), 2 * len(self.seen))
-        for b, i in enumerate(self.seen):
-            m = self.unit.mass[i]
-            # the base force's white-noise intensity: noise_rms^2 x the nominal step (`FrameModel`)
-            kap = rms * rms * like.dt * k1 * k1 * float(self.unit.force_spring[i] @ self.unit.force_spring[i]) / (m * m)
-            kappas.append(kap)
-            p0[2 * b, 2 * b] = kap / (4 * a * w * w)
-            p0[2 * b + 1, 2 * b + 1] = kap / (4 * a)
-        return phi2, q2, ca.vertcat(*kappas) if kappas else ca.MX.zeros(0, 1), p0
-
-    def _kalman(self, resid, mask, phi2, q2, kappas, r, p0):
-        """The Kalman log-likelihood; step k takes column k of phi2 and q2 (or their one column):
-        each seen mode's block is that oscillator's (Phi, kappa_b Q)."""
-        n = 2 * len(self.seen)
-        x = ca.SX.sym("x", n)
-        p = ca.SX.sym("p", n, n)
-        yk, mk = ca.SX.sym("y"), ca.SX.sym("m")
-        f2, g2, kap, rs = ca.SX.sym("phi", 4), ca.SX.sym("q", 4), ca.SX.sym("kappa", len(self.seen)), ca.SX.sym("r")
-        blk, qb = ca.reshape(f2, 2, 2), ca.reshape(g2, 2, 2)
-        ph = ca.diagcat(*[blk] * len(self.seen)) if self.seen else ca.SX(0, 0)
-        qs = ca.diagcat(*[kap[b] * qb for b in range(len(self.seen))]) if self.seen else ca.SX(0, 0)
-        h = ca.DM(self.h)
-        s = ca.mtimes([h.T, p, h]) + rs
-        v = yk - ca.mtimes(h.T, x)
-        gain = ca.mtimes(p, h) / s
-        xu = x + mk * gain * v
-        pu = p - mk * ca.mtimes(gain, ca.mtimes(h.T, p))
-        ll = -0.5 * mk * (ca.log(s) + math.log(2 * math.pi) + v * v / s)
-        acc = ca.SX.sym("acc")
-        xn = ca.mtimes(ph, xu)
-        pn = ca.mtimes([ph, pu, ph.T]) + qs
-        step = ca.Function(
-            "kf",
-            [ca.vertcat(x, ca.reshape(p, n * n, 1), acc), yk, mk, f2, g2, kap, rs],
-            [ca.vertcat(xn, ca.reshape(pn, n * n, 1), acc + ll)],
+        # the base force's white-noise intensity: noise_rms^2 x the nominal step (`FrameModel`)
+        spring = sum(
+            h * h * float(self.unit.force_spring[i] @ self.unit.force_spring[i]) / self.unit.mass[i] ** 2
+            for h, i in zip(self.h[::2], self.seen)
         )
+        return phi2, q2, rms * rms * like.dt * k1 * k1 * spring, a
+
+    def _kalman(self, resid, mask, phi2, q2, kappa, r, a, w):
+        """The Kalman log-likelihood of the seen oscillator (state (q, q'), observed q + noise of
+        variance r, started in its stationary state P0 = kappa diag(1 / (4 a w^2), 1 / (4 a)));
+        step k takes column k of phi2 and q2 (or their one column). P is carried as its three
+        distinct entries."""
+        x0, x1, pa, pb, pc = (ca.SX.sym(n) for n in ("x0", "x1", "pa", "pb", "pc"))
+        yk, mk, acc = ca.SX.sym("y"), ca.SX.sym("m"), ca.SX.sym("acc")
+        f, g, kap, rs = ca.SX.sym("phi", 4), ca.SX.sym("q", 4), ca.SX.sym("kappa"), ca.SX.sym("r")
+        # update with y_k (h = (1, 0)); a gap (m = 0) leaves the state as it is
+        s = pa + rs
+        v = yk - x0
+        ga, gb = mk * pa / s, mk * pb / s
+        u0, u1 = x0 + ga * v, x1 + gb * v
+        ua, ub, uc = pa - ga * pa, pb - ga * pb, pc - gb * pb
+        ll = -0.5 * mk * (ca.log(s) + math.log(2 * math.pi) + v * v / s)
+        # predict: Phi (column order f) and Phi P Phi' + kappa Q
+        f00, f10, f01, f11 = f[0], f[1], f[2], f[3]
+        n0, n1 = f00 * u0 + f01 * u1, f10 * u0 + f11 * u1
+        ta, tb = f00 * ua + f01 * ub, f00 * ub + f01 * uc  # row 0 of Phi P
+        tc, td = f10 * ua + f11 * ub, f10 * ub + f11 * uc  # row 1 of Phi P
+        na = ta * f00 + tb * f01 + kap * g[0]
+        nb = ta * f10 + tb * f11 + kap * g[2]
+        nc = tc * f10 + td * f11 + kap * g[3]
+        state = ca.vertcat(x0, x1, pa, pb, pc, acc)
+        step = ca.Function("kf", [state, yk, mk, f, g, kap, rs], [ca.vertcat(n0, n1, na, nb, nc, acc + ll)])
         run = step.mapaccum("kf_all", resid.shape[0])
-        init = ca.vertcat(ca.MX.zeros(n), ca.reshape(p0, n * n, 1), 0)
-        out = run(init, resid.T, mask.T, phi2, q2, kappas, r)
+        init = ca.vertcat(0, 0, kappa / (4 * a * w * w), 0, kappa / (4 * a), 0)
+        out = run(init, resid.T, mask.T, phi2, q2, kappa, r)
         return out[-1, -1]
