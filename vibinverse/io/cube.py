@@ -449,8 +449,34 @@ def _no_variable(variable: str | None, p: Path) -> None:
 
 
 def _read_netcdf(p: Path, variable: str | None, channel: str) -> RawCube:
-    engine = "h5netcdf" if netcdf_format(p, "input") == "hdf5" else "scipy"
-    return _read_xarray(p, variable, engine)
+    hdf5 = netcdf_format(p, "input") == "hdf5"
+    return _read_xarray(p, variable, "h5netcdf" if hdf5 else "scipy", mapped if hdf5 else None)
+
+
+def mapped(p: Path, name: str) -> np.memmap | None:
+    """An HDF5 (netCDF-4) variable's values mapped from the file, in its stored order, when HDF5
+    keeps it contiguous and uncompressed and xarray would not transform its values (no scale or
+    offset; no fill value to mask, or NaN in a float variable, which masks to itself): the values
+    xarray reads, without the per-read overhead and copy of its HDF5 stack (a detection reads
+    every pixel twice). None otherwise."""
+    import h5py
+
+    with h5py.File(p, "r") as f:
+        ds = f.get(name)
+        if not isinstance(ds, h5py.Dataset) or ds.chunks is not None or ds.compression is not None:
+            return None
+        offset = ds.id.get_offset()
+        attrs = set(ds.attrs)
+        if offset is None or attrs & {"scale_factor", "add_offset", "missing_value", "valid_range", "valid_min"}:
+            return None
+        if "_FillValue" in attrs:
+            fill = np.asarray(ds.attrs["_FillValue"])
+            if ds.dtype.kind != "f" or not np.all(np.isnan(fill)):
+                return None
+        if ds.dtype.kind not in "uif" or (ds.dtype.byteorder not in "=<|" and ds.dtype.itemsize > 1):
+            return None
+        shape, dtype = ds.shape, ds.dtype
+    return np.memmap(p, mode="r", dtype=dtype, offset=int(offset), shape=shape)
 
 
 def _read_zarr(p: Path, variable: str | None, channel: str) -> RawCube:
@@ -458,7 +484,9 @@ def _read_zarr(p: Path, variable: str | None, channel: str) -> RawCube:
     return _read_xarray(p, variable, "zarr")
 
 
-def _read_xarray(p: Path, variable: str | None, engine: str) -> RawCube:
+def _read_xarray(
+    p: Path, variable: str | None, engine: str, mapper: Callable[[Path, str], Any] | None = None
+) -> RawCube:
     try:
         with warnings.catch_warnings():  # a store without consolidated metadata is read all the same
             warnings.filterwarnings("ignore", "Failed to open Zarr store with consolidated metadata")
@@ -479,6 +507,9 @@ def _read_xarray(p: Path, variable: str | None, engine: str) -> RawCube:
     var = ds[name]
     if var.ndim != 3:
         raise DataError(f"input: {p}: variable {name!r} has shape {tuple(var.shape)}; a cube (time, y, x) is needed")
+    direct = mapper(p, name) if mapper is not None else None
+    if direct is not None and direct.shape == var.shape:
+        var = var.copy(data=direct)
     tdim = _time_dim(var)
     ydim, xdim = (d for d in var.dims if d != tdim)
     tcoord = next((var[c] for c in ("time", tdim) if c in var.coords and var[c].dims == (tdim,)), None)

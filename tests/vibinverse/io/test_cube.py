@@ -418,3 +418,29 @@ def test_extract_region_mask_and_read_mask(tmp_path):
     assert np.isnan(values[:, 1, 1]).all() and np.array_equal(values[:, 0, 0], frames[:, 1, 2])
     with pytest.raises(InputError, match=r"^mask: shape \(2, 2\); the frame's shape \(6, 7\)"):
         extract_region(open_cube(tmp_path / "c.npy", fps=1.0), mask=np.ones((2, 2), bool))
+
+
+def test_a_contiguous_netcdf4_cube_is_mapped_and_reads_the_same_values(tmp_path):
+    """A netCDF-4 cube stored contiguous and uncompressed is read by memory map (no per-read HDF5
+    overhead): the values equal xarray's own read exactly, NaN included. A compressed cube, or
+    integer counts with a fill value (which xarray masks), keep the xarray path."""
+    from vibinverse.io.cube import mapped
+
+    rng = np.random.default_rng(2)
+    a = rng.random((50, 6, 5))
+    a[3, 2, 1] = np.nan
+    path = tmp_path / "plain.nc"
+    xr.Dataset({"intensity": (("time", "y", "x"), a)}, coords={"time": np.arange(50) * 0.01}).to_netcdf(
+        path, engine="h5netcdf"
+    )
+    assert isinstance(mapped(path, "intensity"), np.memmap)
+    got = open_cube(path)
+    np.testing.assert_array_equal(got.values, a)
+    packed = tmp_path / "packed.nc"
+    counts = rng.integers(0, 255, (50, 6, 5)).astype(np.uint8)
+    xr.Dataset({"intensity": (("time", "y", "x"), counts)}, coords={"time": np.arange(50) * 0.01}).to_netcdf(
+        packed, engine="h5netcdf", encoding={"intensity": {"zlib": True, "_FillValue": 255}}
+    )
+    assert mapped(packed, "intensity") is None
+    ref = xr.open_dataset(packed, engine="h5netcdf")["intensity"].values
+    np.testing.assert_array_equal(open_cube(packed).values, ref)
