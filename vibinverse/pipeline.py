@@ -1,13 +1,16 @@
 """The fitting pipeline: spectral -> SINDy -> MAP (casadi, else scipy) -> emcee, each stage seeding
 the next; `--method` stops it at a stage. A stage that fails is recorded and the chain goes on: a
 declined SINDy leaves the MAP to start from the spectral candidates, and a casadi MAP that does not
-cover the model or fails falls back to the derivative-free MAP."""
+cover the model or fails falls back to the derivative-free MAP. A model that cannot describe how the
+pixel sees the motion under any spectral reading (`check_observation`) stops the fit with a
+one-line DataError before any estimate is returned."""
 
 from __future__ import annotations
 
 import logging
 import math
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
 from forward.scene import format_bytes, memory_limit
 from vibinverse.detection import DETECTION_GAIN
@@ -49,6 +52,24 @@ def check_fit(posterior: Posterior) -> None:
             check_resolves(series, max(lo, 1e-12), n)  # the lowest frequency needs the longest record
 
 
+@runtime_checkable
+class ObservationCheck(Protocol):
+    """A model whose observation of the motion holds only in part of the scene's space (the frame
+    model's linearized tilt: `FrameModel.check_first_order`)."""
+
+    def check_first_order(self, readings: list[dict[str, float]]) -> None: ...
+
+
+def check_observation(posterior: Posterior, spectral: FitResult) -> None:
+    """DataError (from the model) when its observation describes the pixel under none of the
+    spectral readings of the data: a frame scene whose pixel sees the tilt mostly at second order
+    (view on the lobe centre, symmetric footprint), where the Kalman likelihood would fit a wrong
+    resonance with confident intervals. A deterministic line seen at second order needs no check:
+    its mean is the second-order model itself (`DeterministicModel`)."""
+    if isinstance(posterior.model, ObservationCheck):
+        posterior.model.check_first_order(spectral.starts or [spectral.point])
+
+
 def run(
     posterior: Posterior,
     method: str = "auto",
@@ -68,6 +89,7 @@ def run(
         SindyEstimator().estimate(posterior, None)  # raises Unsupported with the reason
     timing: dict[str, float] = {}
     spectral = SpectralEstimator().fit(posterior)
+    check_observation(posterior, spectral)
     timing.update(spectral.timing)
     if method == "spectral":
         return spectral

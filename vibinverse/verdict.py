@@ -6,7 +6,9 @@ and returns a `Verdict`: one `VerdictLine` per line tested (the detection test's
 `{what}_false_alarm_probability` diagnostics, `vibinverse.detection`) with its frequency +- its
 uncertainty, and a trust decision from the sampler's convergence (R-hat, ESS, `converged`) and the
 residual checks (`diagnostics["residual_checks"]`, `vibinverse.checks`). `Verdict.headline` is one
-plain-text line the command line prints; the HTML report's first box shows the same.
+plain-text line the command line prints; the HTML report's first box shows the same. A line the
+scene sees only at second order (the summary's `data.model.second_order`, e.g. a plate over a
+symmetric footprint) is reported at its own frequency f, with a note that the data's line is at 2f.
 
 Trust is decided, not guessed: `trusted` is False when any check fails (not converged, R-hat above
 1.01 or ESS below 400, residuals not white or not Gaussian, a Hessian that is not positive definite,
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -108,6 +111,7 @@ class VerdictLine:
     uncertainty: float = math.nan
     uncertainty_kind: str = ""  # "sd" or "half the 90 % interval"
     units: str = "Hz"
+    second_order: bool = False  # the scene sees the line only at second order: the data show it at 2f
 
     def where(self, plus_minus: str = "+-") -> str:
         """ "at 3.466 +- 0.004 Hz", or "" when the frequency is not fitted."""
@@ -117,10 +121,15 @@ class VerdictLine:
 
     def text(self, plus_minus: str = "+-") -> str:
         """ "tilt resonance detected at 3.466 +- 0.004 Hz", "drive line not detected (false-alarm
-        probability 0.68)"."""
+        probability 0.68)"; a line seen only at second order says that its spectral line is at 2f
+        (the fit reports f, the frequency of the motion)."""
         if self.detected:
             where = self.where(plus_minus)
-            return f"{self.label} detected {where}".rstrip() if where else f"{self.label} detected"
+            text = f"{self.label} detected {where}".rstrip() if where else f"{self.label} detected"
+            if self.second_order and where:
+                twice = format_number(2 * self.value, ".6g")
+                text += f" (seen at second order: the data's line is at {twice} {self.units})"
+            return text
         return f"{self.label} not detected (false-alarm probability {format_probability(self.false_alarm_probability)})"
 
 
@@ -156,7 +165,8 @@ def _frequency_parameter(what: str, parameters: dict[str, Any]) -> str | None:
     return pool[i] if i < len(pool) else None
 
 
-def _line(what: str, diagnostics: dict, parameters: dict) -> VerdictLine:
+def _line(what: str, diagnostics: dict, parameters: dict, second_order: Sequence[str] = ()) -> VerdictLine:
+    """`second_order`: frequency names the model sees only at second order (its data.model)."""
     stem = re.sub(r"_(\d+)$", "", what)
     index = what[len(stem) + 1 :]
     label = _LABELS.get(stem, stem.replace("_", " "))
@@ -185,6 +195,7 @@ def _line(what: str, diagnostics: dict, parameters: dict) -> VerdictLine:
             line.uncertainty, line.uncertainty_kind = 0.5 * (q95 - q05), "half the 90 % interval"
         units = p.get("units")
         line.units = units if isinstance(units, str) and units else "Hz"
+        line.second_order = name in second_order or f"{name}[0]" in second_order
     return line
 
 
@@ -192,7 +203,10 @@ def lines_tested(summary: dict) -> list[VerdictLine]:
     """Every line of `summary["diagnostics"]` with a `{what}_detected` key, in the summary's order."""
     d = summary.get("diagnostics") if isinstance(summary.get("diagnostics"), dict) else {}
     params = summary.get("parameters") if isinstance(summary.get("parameters"), dict) else {}
-    return [_line(str(k)[: -len("_detected")], d, params) for k in d if str(k).endswith("_detected")]
+    data = summary.get("data") if isinstance(summary.get("data"), dict) else {}
+    model = data.get("model") if isinstance(data.get("model"), dict) else {}
+    second = [n for n in model.get("second_order") or [] if isinstance(n, str)]
+    return [_line(str(k)[: -len("_detected")], d, params, second) for k in d if str(k).endswith("_detected")]
 
 
 def _convergence(summary: dict) -> tuple[float, float]:

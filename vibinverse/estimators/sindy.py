@@ -49,6 +49,9 @@ REL_THRESHOLD = 0.004  # a library term must carry >= 0.4 % of R'' (column-norma
 # free response vs correlation function, relative rms (a true mode: 0.04-0.2; a steady line or band-passed
 # noise: >= 0.35)
 MAX_MISFIT = 0.3
+# first/second-order ratio (`FrameModel.first_order_ratio`) below which the signal is no scaled copy of
+# the modal coordinate and the correlation function no free response of the mode
+MIN_FIRST_ORDER = 3.0
 LIBRARY_DEGREE = 1  # [1, R, R']: the physics is linear; the constant is the candidate spurious term
 
 
@@ -62,8 +65,6 @@ class ResonanceModel(Protocol):
     observation (the frame model)."""
 
     key: str
-    jac: np.ndarray
-    hess: np.ndarray
 
     def components(self, values: dict[str, float]) -> Any: ...
 
@@ -75,18 +76,7 @@ class ResonanceModel(Protocol):
 
     def resonance_values(self) -> dict[str, float]: ...
 
-
-def first_order_ratio(like: ResonanceModel, values: dict[str, float]) -> float:
-    """How much the pixel's first-order term exceeds its second-order term at the typical tilt:
-    |J| g / (|H| g^2 / 2), with g the tilt's stationary rms plus the drive's tilt amplitude."""
-    c = like.components({**values, like.key + "drive_amplitude": 0.0})
-    g_noise = float(np.sqrt(max(np.trace(c.p0) / max(c.h.size // 2, 1), 0.0)))
-    drive = like.components({**values, like.key + "noise_rms": 0.0}).mean
-    j = float(np.linalg.norm(like.jac))
-    g_drive = float(np.ptp(drive)) / 2 / j if j > 0 else 0.0
-    g = max(g_noise + g_drive, 1e-12)
-    h = float(np.linalg.norm(like.hess, 2))
-    return j * g / max(0.5 * h * g * g, 1e-300)
+    def first_order_ratio(self, values: dict[str, float]) -> float: ...
 
 
 def _autocovariance(r: np.ndarray, mask: np.ndarray, lags: int) -> np.ndarray:
@@ -154,8 +144,8 @@ def sindy_frame(series: Series, like: ResonanceModel, start: dict[str, float]) -
         raise SindyFailed(
             "sindy: the correlation function needs a uniform grid and the stamps are irregular; the MAP takes over"
         )
-    ratio = first_order_ratio(like, start)
-    if ratio < 3.0:
+    ratio = like.first_order_ratio(start)
+    if ratio < MIN_FIRST_ORDER:
         raise SindyFailed(
             f"sindy: the pixel sees the tilt mostly at second order (first/second order = {ratio:.2g}; "
             "view on the lobe centre or a symmetric footprint), so the signal is not a scaled copy of "

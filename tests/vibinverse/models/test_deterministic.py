@@ -244,3 +244,22 @@ def test_a_line_seen_only_at_second_order_gets_a_pi_phase_window_and_is_fitted(t
     for n in (K + "frequency", K + "center_deflection", K + "phase"):
         p = summary["parameters"][n]
         assert p["q05"] <= p["truth"] <= p["q95"], (n, p)
+
+
+def test_the_detection_null_keeps_the_mean_level_when_the_gain_is_free():
+    """At second order the whole line moves the mean level (a^2 cos^2 = a^2 (1 + cos 2wt) / 2); the
+    null of the detection test rescales the free gain so that its level is the fit's (a fitted gain
+    would absorb it), and leaves a fixed gain alone (then the level is evidence of the line)."""
+    table, series = simulate(
+        "roof_elastic", LOW_RES, "footprint.x=[-25.0, 25.0]", "footprint.y=[-25.0, 25.0]", "noise.sigma=2e-4"
+    )
+    like = DeterministicModel(table, series)
+    assert like.describe()["second_order"] == [K + "frequency"]
+    values = {K + "frequency": 40.0, K + "center_deflection": 2e-3, K + "phase": 0.3, "sun.irradiance": 1.0}
+    (test,) = like.line_tests(values, list(values))
+    level = np.mean(like.mean(values))
+    # the vibration's own level is ~3e-5 of the whole: a relative 1e-12 leaves it 2e-8 of its size
+    assert np.mean(like.mean({**values, **test.null})) == pytest.approx(level, rel=1e-12)
+    assert np.mean(like.mean({**values, K + "center_deflection": 0.0})) < level * (1 - 1e-6)  # the test is not vacuous
+    (fixed,) = like.line_tests(values, [n for n in values if n != "sun.irradiance"])
+    assert fixed.null == {K + "center_deflection": 0.0}
