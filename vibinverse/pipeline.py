@@ -155,7 +155,11 @@ def _alternatives(posterior: Posterior, best: FitResult, method: str, seed: int)
     runs = []
     for what, values in posterior.model.alternatives(best.point, space.names):
         start = {n: p.inside(values.get(n, best.point[n])) for n, p in zip(space.names, space.priors)}
-        runs.append((what, _map(posterior, base_result(posterior, "start", start, starts=[start]), method, seed)))
+        # a casadi run whose optimum is predicted more than the ambiguity margin below the best is
+        # abandoned (`casadi_map`'s floor): it could neither win nor be reported as ambiguous
+        floor = _finite(best.log_post) - AMBIGUITY_MARGIN
+        first = base_result(posterior, "start", start, starts=[start])
+        runs.append((what, _map(posterior, first, method, seed, floor=floor if math.isfinite(floor) else None)))
     if not runs:
         return best
     every = [best, *(r for _, r in runs)]
@@ -192,10 +196,10 @@ def _finite(v: float | None) -> float:
     return v if v is not None and math.isfinite(v) else -math.inf
 
 
-def _map(posterior: Posterior, start: FitResult, method: str, seed: int) -> FitResult:
+def _map(posterior: Posterior, start: FitResult, method: str, seed: int, floor: float | None = None) -> FitResult:
     if method != "map":
         try:
-            return CasadiMap().fit(posterior, start, seed=seed)
+            return CasadiMap().fit(posterior, start, seed=seed, floor=floor)
         except Unsupported as exc:
             logger.info("the casadi MAP does not cover this fit (%s); using the scipy MAP", exc)
         except (NumericalError, RuntimeError) as exc:  # any solver failure falls back, and says so

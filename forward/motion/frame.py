@@ -26,9 +26,7 @@ from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.integrate import solve_ivp
 from scipy.linalg import expm, solve_discrete_lyapunov
-from scipy.signal import lfilter
 
 from forward.errors import SceneError
 from forward.motion.base import ModalMotion, Motion
@@ -285,6 +283,8 @@ def _propagate(
     Cayley-Hamilton: both the forced and the free response obey the recursion with denominator
     1 - tr(Phi) z^-1 + det(Phi) z^-2; numerators follow from adj(zI - Phi) = zI + Phi - tr(Phi) I.
     """
+    from scipy.signal import lfilter  # here, not at import: scipy.signal costs ~1 s of every CLI start
+
     tr, det = np.trace(phi), np.linalg.det(phi)
     den = np.array([1.0, -tr, det])
     n = g.size
@@ -404,6 +404,7 @@ class NonlinearFrame:
         atol: float = 1e-14,
     ) -> NDArray[np.float64]:
         """States at times t (uniform). Base noise (len(t), 12) is held constant over each sample."""
+        from scipy.integrate import solve_ivp  # here, not at import: scipy.integrate costs ~1 s
 
         def base(tt: float, k: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
             a, da = drive.base(tt) if drive is not None else (np.zeros(12), np.zeros(12))
