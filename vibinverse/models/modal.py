@@ -69,7 +69,14 @@ import numpy as np
 from vibinverse.errors import SceneError
 from vibinverse.io.series import MIN_CYCLES, Series, evenly_spaced
 from vibinverse.kalman import njit, unique_steps
-from vibinverse.models.base import LineTest, SignalModel, intensity_units, parameter_units, register_model
+from vibinverse.models.base import (
+    LineTest,
+    SignalModel,
+    intensity_units,
+    observed_information,
+    parameter_units,
+    register_model,
+)
 from vibinverse.priors import Prior
 
 NOISE_KINDS = ("white", "ar1", "1/f")
@@ -1044,32 +1051,19 @@ class ModalModel(SignalModel):
         step of 0.1 / sqrt(curvature) (a tenth of the parameter's sd), so that every step is small
         against the likelihood's width whatever the units."""
         v0 = {**{n: self.value(values, n) for n in self._names}, **values}
-        ll = lambda d: self._run({**v0, **d}, np.empty(0), np.empty(0), freeze=False)
-        f0 = ll({})
-        steps = []
-        for n in names:
-            scale = (
-                abs(v0[n]) if not n.endswith("phase") and n != "level" else (1.0 if n.endswith("phase") else self.sd)
-            )
-            h = 1e-4 * max(scale, 1e-6 * self.sd if n != "level" else self.sd)
-            curv = -(ll({n: v0[n] + h}) - 2 * f0 + ll({n: v0[n] - h})) / h**2
-            h2 = 0.1 / math.sqrt(curv) if curv > 0 and math.isfinite(curv) else h
-            if not n.endswith("phase") and n != "level" and v0[n] > 0:
-                h2 = min(h2, 0.5 * v0[n])
-            steps.append(h2)
-        k = len(names)
-        out = np.zeros((k, k))
-        for a in range(k):
-            na, ha = names[a], steps[a]
-            out[a, a] = -(ll({na: v0[na] + ha}) - 2 * f0 + ll({na: v0[na] - ha})) / ha**2
-            for b in range(a):
-                nb, hb = names[b], steps[b]
-                pp = ll({na: v0[na] + ha, nb: v0[nb] + hb})
-                pm = ll({na: v0[na] + ha, nb: v0[nb] - hb})
-                mp = ll({na: v0[na] - ha, nb: v0[nb] + hb})
-                mm = ll({na: v0[na] - ha, nb: v0[nb] - hb})
-                out[a, b] = out[b, a] = -(pp - pm - mp + mm) / (4 * ha * hb)
-        return out
+
+        def scale(n: str) -> float:
+            if n == "level":
+                return self.sd
+            return max(1.0 if n.endswith("phase") else abs(v0[n]), 1e-6 * self.sd)
+
+        return observed_information(
+            lambda d: self._run({**v0, **d}, np.empty(0), np.empty(0), freeze=False),
+            v0,
+            names,
+            scale,
+            lambda n: not n.endswith("phase") and n != "level",
+        )
 
     # -------------------------------------------------------------- what the order search reads
     def components(self, values: dict[str, float]) -> list[dict[str, Any]]:

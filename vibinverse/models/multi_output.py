@@ -54,7 +54,7 @@ import numpy as np
 from vibinverse.errors import SceneError
 from vibinverse.io.series import Series, validate
 from vibinverse.kalman import njit, simulate
-from vibinverse.models.base import LineTest, SignalModel, register_model
+from vibinverse.models.base import LineTest, SignalModel, observed_information, register_model
 from vibinverse.models.modal import ModalModel
 from vibinverse.priors import Prior
 
@@ -517,31 +517,19 @@ class MultiOutputModel(SignalModel):
         the exact log-likelihood, each step a tenth of the parameter's sd (from a first pass at
         1e-4 of its scale), at most half its value for a positive parameter."""
         v0 = {**{n: self.value(values, n) for n in self._names}, **values}
-        ll = lambda d: self._run({**v0, **d}, np.empty((0, 0)), np.empty(0))
-        f0 = ll({})
-        positive = lambda n: not n.endswith(("phase", "level"))
-        steps = []
-        for n in names:
-            scale = 1.0 if n.endswith("phase") else (self.sd if n.endswith("level") else abs(v0[n]))
-            h = 1e-4 * max(scale, 1e-6 * self.sd)
-            curv = -(ll({n: v0[n] + h}) - 2 * f0 + ll({n: v0[n] - h})) / h**2
-            h2 = 0.1 / math.sqrt(curv) if curv > 0 and math.isfinite(curv) else h
-            if positive(n) and v0[n] > 0:
-                h2 = min(h2, 0.5 * v0[n])
-            steps.append(h2)
-        k = len(names)
-        out = np.zeros((k, k))
-        for a in range(k):
-            na, ha = names[a], steps[a]
-            out[a, a] = -(ll({na: v0[na] + ha}) - 2 * f0 + ll({na: v0[na] - ha})) / ha**2
-            for b in range(a):
-                nb, hb = names[b], steps[b]
-                pp = ll({na: v0[na] + ha, nb: v0[nb] + hb})
-                pm = ll({na: v0[na] + ha, nb: v0[nb] - hb})
-                mp = ll({na: v0[na] - ha, nb: v0[nb] + hb})
-                mm = ll({na: v0[na] - ha, nb: v0[nb] - hb})
-                out[a, b] = out[b, a] = -(pp - pm - mp + mm) / (4 * ha * hb)
-        return out
+
+        def scale(n: str) -> float:
+            if n.endswith("level"):
+                return self.sd
+            return max(1.0 if n.endswith("phase") else abs(v0[n]), 1e-6 * self.sd)
+
+        return observed_information(
+            lambda d: self._run({**v0, **d}, np.empty((0, 0)), np.empty(0)),
+            v0,
+            names,
+            scale,
+            lambda n: not n.endswith(("phase", "level")),
+        )
 
     def components(self, values: dict[str, float]) -> list[dict[str, Any]]:
         """The fitted sources at `values`, JSON-able, one per output: its kind, output, index and
