@@ -325,13 +325,8 @@ def _combine_pass(matrix: PixelMatrix, gain: np.ndarray, offset: np.ndarray, sig
 
 
 def _residual_pass(matrix: PixelMatrix, z: np.ndarray, valid: np.ndarray, gain: np.ndarray, offset: np.ndarray):
-    """Each pixel's residual variance about c_i + g_i z over the valid frames (ddof 1)."""
-    zv = z[valid]
-    v = np.empty(matrix.n)
-    for sl, block in matrix.blocks():
-        r = block[valid] - offset[sl] - np.outer(zv, gain[sl])
-        v[sl] = np.sum((r - r.mean(axis=0)) ** 2, axis=0) / (zv.size - 1)
-    return v
+    """Each pixel's residual variance about c_i + g_i z over the valid frames (ddof 1): one source."""
+    return _residual_modes_pass(matrix, z[:, None], valid, gain[:, None], offset)
 
 
 def scale_gains(
