@@ -85,6 +85,7 @@ FLICKER_DECADES = (1.0, 0.1, 0.01)  # correlation times, x span / (2 pi)
 GAIN_TERMS = 6  # the gain drift's cosines: 0.5 to 3 cycles per record
 GAIN_LIMIT = 0.5  # each coefficient's prior: uniform (-limit, limit)
 FREEZE_TOL = 1e-14  # the filter holds its gain once the covariance has converged to this (relative)
+FREEZE_ROUNDING = 1e-15  # a relative change this small is rounding: it counts as converged
 
 _OSC, _WALK, _IWALK, _OU = 0, 1, 2, 3
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -357,10 +358,15 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, ns
     """log p(y) of x_k = Phi_k x_{k-1} + w_k, y_k = h . x_k + v_k with block-diagonal Phi_k
     (= phis[idx[k]]; state i's block is lo[i]..hi[i]) and Q_k, x_0 ~ N(0, P0); NaN gaps skipped.
     Writes the standardized innovations to `white` and each sample's log density to `lls` when
-    they are not empty (NaN at gaps). With `freeze`, the gain and the innovation variance are held
-    once they stop changing between two observed samples of the same step (their change,
-    extrapolated geometrically, below FREEZE_TOL of their scale: the Riccati recursion's fixed point
-    to rounding), until a gap or another step (module docstring). `hm` (empty, or one value per
+    they are not empty (NaN at gaps). With `freeze` = m > 0, the gain and the innovation variance
+    are held once they have stopped changing over m consecutive observed samples of the same step
+    (each change, extrapolated geometrically, below FREEZE_TOL of their scale, or at rounding: the
+    Riccati recursion's fixed point to rounding), until a gap or another step (module docstring).
+    m spans the slowest mode's period: with lightly damped modes the recursion converges with
+    an oscillation, whose changes dip towards 0 twice a period long before it has converged; a
+    test on one pair of samples then held a gain 0.003 off in log-likelihood, and the likelihood
+    jumped by that much between neighbouring parameter values (a finite-difference Hessian of
+    6e7 where the curvature is 60). 0: never held. `hm` (empty, or one value per
     sample): the gain drift, multiplying the observation of states 0..nscaled-1 (the modes) at each
     sample; the gain then changes every sample, so it is never held (`freeze` must be False)."""
     n = phis.shape[1]
@@ -398,6 +404,7 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, ns
     prev_u = -1
     last_delta = np.inf
     frozen = False
+    calm = 0  # consecutive samples that met the hold's test
     fu = -1
     sf = 1.0
     ll = 0.0
@@ -483,7 +490,14 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, ns
                     d = abs(ph[i] / s - prev_gain[i])
                     if d > 0.0:
                         delta = max(delta, d / scale)
-                if delta == 0.0 or (delta < last_delta < np.inf and delta * delta <= FREEZE_TOL * (last_delta - delta)):
+                if delta <= FREEZE_ROUNDING or (
+                    delta < last_delta < np.inf and delta * delta <= FREEZE_TOL * (last_delta - delta)
+                ):
+                    calm += 1
+                else:
+                    calm = 0
+                if calm >= freeze:
+                    calm = 0
                     frozen = True
                     fu = u
                     sf = s
@@ -492,6 +506,8 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, ns
                         for j in range(n):
                             pf[i, j] = p[i, j]
                 last_delta = delta
+            else:
+                calm = 0
             for i in range(n):
                 prev_gain[i] = ph[i] / s
             prev_s = s
@@ -807,13 +823,25 @@ class ModalModel(SignalModel):
                 self.h,
                 r,
                 p0,
-                freeze and not hm.size,
+                self.hold(values) if freeze and not hm.size else 0,
                 white,
                 lls,
                 hm,
                 self.n_scaled,
             )
         )
+
+    def hold(self, values: dict[str, float]) -> int:
+        """Samples over which the filter's gain must stay converged before it is held
+        (`_block_filter`'s `freeze`): one period of the slowest mode at the shortest step, plus one;
+        1 without modes (walks and Ornstein-Uhlenbeck states converge without oscillating)."""
+        if not self.spec.modes:
+            return 1
+        f = min(self.value(values, f"modes[{i}].frequency") for i in range(self.spec.modes))
+        step = float(self.steps.min())
+        if not f > 0 or not step > 0:
+            return self.t.size
+        return int(min(self.t.size, math.ceil(1.0 / (f * step)) + 1))
 
     def _sorted(self, values: dict[str, float]) -> bool:
         """Modes and lines each in strictly increasing frequency (the label-switching constraint)."""

@@ -158,7 +158,7 @@ def test_held_gain_saves_work_and_keeps_the_numbers():
     mean, phis, qs, r, p0 = m.tables(values)
     e = np.empty(0)
     args = (s.intensity - mean, phis, qs, m.idx, m.lo, m.hi, m.h, r, p0)
-    held, full = _block_filter(*args, True, e, e, e, 0), _block_filter(*args, False, e, e, e, 0)
+    held, full = _block_filter(*args, m.hold(values), e, e, e, 0), _block_filter(*args, 0, e, e, e, 0)
     assert held == pytest.approx(full, rel=1e-12)
 
 
