@@ -103,6 +103,11 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
         return 0
+    except Exception as exc:  # Ctrl-C inside a C extension's import comes back as ImportError
+        if not _interrupted(exc):
+            raise
+        print("vibinverse: interrupted", file=sys.stderr)
+        return SIGNAL_EXIT[signal.SIGINT]
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
@@ -136,6 +141,19 @@ def entry() -> None:
         sys.stderr.flush()
         os._exit(code)
     sys.exit(code)
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is in the exception's chain (a module whose initialization Ctrl-C
+    stopped raises "ImportError: initialization failed" from it)."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, KeyboardInterrupt):
+            return True
+        seen.add(id(cur))
+        cur = cur.__cause__ or cur.__context__
+    return False
 
 
 def _main_thread() -> bool:

@@ -468,3 +468,35 @@ def test_fit_without_a_scene_uses_the_modal_model_with_the_order_fixed_or_chosen
     gains = [forced["parameters"][f"gain.a{j}"]["median"] for j in range(1, 7)]
     assert max(abs(g) for g in gains) < 0.2  # no gain drift in the data: each coefficient ~ its sd
     assert forced["parameters"]["modes[0].frequency"]["median"] == pytest.approx(2.2, rel=0.01)
+
+
+def test_ctrl_c_inside_an_extension_import_is_one_line_and_130(monkeypatch, capsys):
+    """Ctrl-C while a C extension initializes comes back as "ImportError: initialization failed"
+    raised from the KeyboardInterrupt (seen in the Ctrl-C test at 1.5 s): still one line, 130."""
+    import argparse
+
+    from vibinverse import cli
+    from vibinverse.cli import commands
+
+    def verb(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise ImportError("initialization failed") from exc
+
+    class Parser:
+        def parse_args(self, argv):
+            return argparse.Namespace(func=verb)
+
+    monkeypatch.setattr(commands, "build_parser", lambda: Parser())
+    assert cli.main([]) == 130
+    assert capsys.readouterr().err.strip() == "vibinverse: interrupted"
+
+    def broken(args):
+        raise ImportError("a real import error")
+
+    monkeypatch.setattr(
+        commands, "build_parser", lambda: type("P", (), {"parse_args": lambda s, a: argparse.Namespace(func=broken)})()
+    )
+    with pytest.raises(ImportError, match="a real import error"):
+        cli.main([])
