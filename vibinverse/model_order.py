@@ -60,7 +60,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from vibinverse.errors import NumericalError
-from vibinverse.io.series import MIN_CYCLES, Series
+from vibinverse.io.series import FEW_CYCLES, MIN_CYCLES, Series
 from vibinverse.models.modal import GAIN_TERMS, ModalModel, ModalSpec, gain_names, mode_start, smooth, spectrum
 from vibinverse.priors import ParameterSpace
 
@@ -70,6 +70,7 @@ MAX_MODES = 6
 MAX_LINES = 6
 REFIT_TOP = 2  # candidates refitted with every parameter free, per step
 SPLIT_DAMPING = 0.05  # a mode this broad is also tried as two (`split_candidates`)
+SLOW_DAMPING = 0.5  # a mode this damped (or of under FEW_CYCLES cycles) is also tried as a drift
 SEARCHED = ("modes", "lines", "drift", "noise", "gain")
 
 
@@ -284,7 +285,8 @@ def candidates(fit: OrderFit, series: Series, search: dict[str, bool], caps: tup
 
 
 def split_candidates(spec: ModalSpec, values: dict[str, float], nyq: float) -> list[Candidate]:
-    """The broadest mode, when its damping ratio exceeds SPLIT_DAMPING, split into two at its
+    """The broadest mode, when its damping ratio exceeds SPLIT_DAMPING (and is not nearly critical,
+    SLOW_DAMPING: such a hump is a drift or coloured noise, `neighbours`), split into two at its
     half-power points f (1 -+ zeta), each a third of its damping and half its variance: two close
     resonances fitted as one broad hump (three ambient modes within 1.6-2.7 Hz became a mode and a
     hump of zeta 0.12-0.19) are not found otherwise, because the residual spectrum then shows no
@@ -293,7 +295,7 @@ def split_candidates(spec: ModalSpec, values: dict[str, float], nyq: float) -> l
     zetas = [values[f"modes[{i}].damping_ratio"] for i in range(k)]
     i = int(np.argmax(zetas))
     zeta, f = zetas[i], values[f"modes[{i}].frequency"]
-    if zeta <= SPLIT_DAMPING or f * (1 + zeta) >= nyq:
+    if not SPLIT_DAMPING < zeta <= SLOW_DAMPING or f * (1 + zeta) >= nyq:
         return []
     rms = values[f"modes[{i}].rms"] / math.sqrt(2.0)
     start = dict(values)
@@ -357,6 +359,17 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
             f = values[f"modes[{i}].frequency"]
             start = _renumber(values, "modes", i, spec.modes)
             out.append(move(f"remove the mode at {f:.4g} Hz", replace(spec, modes=spec.modes - 1), [start]))
+            slow = f * span < FEW_CYCLES or values[f"modes[{i}].damping_ratio"] > SLOW_DAMPING
+            if slow and search["drift"] and spec.drift == "none":
+                # a mode of under 3 cycles in the record, or nearly critically damped, may be a drift
+                rate = values[f"modes[{i}].rms"] / math.sqrt(span)
+                out.append(
+                    move(
+                        f"the mode at {f:.4g} Hz exchanged for a random-walk drift",
+                        replace(spec, modes=spec.modes - 1, drift="walk"),
+                        [{**start, "drift.rate": rate * k} for k in (0.3, 1.0)],
+                    )
+                )
     if search["lines"]:
         for j in range(spec.lines):
             f = values[f"lines[{j}].frequency"]
