@@ -22,7 +22,9 @@ unconstrained space (L-BFGS-B with finite-difference gradients, each coordinate 
 curvature; a new mode from two damping starts). The candidate that lowers the BIC most is kept. When
 no addition lowers it, backward and exchange moves are tried the same way (each mode, line, drift or
 coloured noise removed; AR(1) and 1/f exchanged; a coloured noise and a random-walk drift exchanged;
-an additive drift and a gain drift exchanged, both of which explain a changing level): the greedy
+an additive drift and a gain drift exchanged, both of which explain a changing level; a mode or
+a line of under 3 cycles in the record, or a mode of damping > 0.5, exchanged for a drift, a line
+also for a gain drift): the greedy
 forward step may take a heavily damped low-frequency mode, or a slow AR(1), for what is AR(1) noise,
 or a drift, and the stepwise search undoes it. The search stops when no move lowers the BIC, or at
 the caps (6 modes, 6 lines). A component the user fixes (`modes`, `lines`, `drift`, `noise` or
@@ -375,6 +377,29 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
             f = values[f"lines[{j}].frequency"]
             start = _renumber(values, "lines", j, spec.lines)
             out.append(move(f"remove the line at {f:.6g} Hz", replace(spec, lines=spec.lines - 1), [start]))
+            if f * span >= FEW_CYCLES:
+                continue
+            # a line of under 3 cycles in the record may be a slow change of the level
+            fewer = replace(spec, lines=spec.lines - 1)
+            amp = values[f"lines[{j}].amplitude"]
+            if search["drift"] and spec.drift == "none":
+                rates = [{**start, "drift.rate": amp / math.sqrt(span) * k} for k in (0.3, 1.0)]
+                out.append(
+                    move(
+                        f"the line at {f:.4g} Hz exchanged for a random-walk drift", replace(fewer, drift="walk"), rates
+                    )
+                )
+            if search["gain"] and not spec.gain:
+                names = gain_names(GAIN_TERMS)
+                coef = fit.model.gain_start(GAIN_TERMS)
+                gain_start = {**start, **{n: float(c) for n, c in zip(names, coef)}}
+                out.append(
+                    move(
+                        f"the line at {f:.4g} Hz exchanged for a gain drift",
+                        replace(fewer, gain=GAIN_TERMS),
+                        [gain_start],
+                    )
+                )
     if search["drift"] and spec.drift != "none":
         out.append(move("remove the drift", replace(spec, drift="none"), [dict(values)]))
     if search["noise"] and spec.noise != "white":

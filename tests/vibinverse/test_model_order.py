@@ -198,6 +198,19 @@ def test_a_trend_is_a_drift_not_a_slow_mode(seed):
     assert freqs(res, "line") == [pytest.approx(10.0, abs=5e-3)]  # a tenth of the resolution 1 / 20 s
 
 
+def test_a_slow_level_change_is_not_kept_as_a_line():
+    """The robustness bench's gain-drift case, seed 14 (the level times 1 + g, g sinusoids of 0.5-3
+    cycles per record): the search had kept a line at 0.08 Hz (1.6 cycles in 20 s) for the level's
+    change; the exchange move (a line of under 3 cycles for a random-walk drift or a gain drift)
+    leaves the true line only."""
+    from vibinverse.bench.robustness_bench import simulate as bench_simulate
+
+    d = bench_simulate("gain_drift", 14)
+    res = choose_order(vi.series(d.time, d.intensity))
+    assert freqs(res, "line") == [pytest.approx(10.0, abs=5e-3)], res.components  # a tenth of 1 / 20 s
+    assert freqs(res) == [pytest.approx(3.464, rel=0.03)]
+
+
 def test_ar1_noise_and_one_mode():
     t, y = simulate(3000, modes=[(2.3, 0.02, 0.6)], sigma=0.3, ar=(0.9, 1.0), seed=0)
     res = choose_order(vi.series(t, y))
