@@ -351,6 +351,21 @@ def scale_gains(
 REFERENCES = ("weighted", "best")  # the scale conventions by name; a pixel (y, x) is the third
 
 
+def reference_index(matrix: PixelMatrix, reference: Any, iterations: int) -> int | None:
+    """The checked options of a gain estimate: the index of the reference pixel (y, x) among the
+    selected pixels, or None for a named convention ("weighted", "best")."""
+    if iterations < 1:
+        raise InputError(f"iterations: {iterations}; allowed range [1, inf)")
+    if isinstance(reference, str):
+        if reference not in REFERENCES:
+            raise InputError(f"reference: {reference!r}; allowed: {', '.join(map(repr, REFERENCES))} or a pixel (y, x)")
+        return None
+    hit = np.flatnonzero((matrix.y == reference[0]) & (matrix.x == reference[1]))
+    if hit.size == 0:
+        raise InputError(f"reference: pixel {tuple(reference)} is not among the selected pixels")
+    return int(hit[0])
+
+
 def estimate_gains(
     matrix: PixelMatrix,
     *,
@@ -365,20 +380,11 @@ def estimate_gains(
     until the weights settle. `gains` fixes the gains (optical flow: s is then in their units);
     else their scale is set by `reference` (`scale_gains`): "weighted" (the SNR-weighted mean
     |gain| is 1), "best" (the pixel of the largest SNR share has gain +1), or a pixel (y, x)."""
-    if iterations < 1:
-        raise InputError(f"iterations: {iterations}; allowed range [1, inf)")
-    if isinstance(reference, str) and reference not in REFERENCES:
-        raise InputError(f"reference: {reference!r}; allowed: {', '.join(map(repr, REFERENCES))} or a pixel (y, x)")
+    if gains is not None and not isinstance(reference, str):
+        raise InputError("reference: the optical-flow gains are absolute; there is no reference pixel")
+    ref = reference_index(matrix, reference, iterations)
     levels = noise_levels(matrix)
     valid, mean, floor = levels.valid, levels.mean, levels.sigma
-    ref = None
-    if not isinstance(reference, str):
-        if gains is not None:
-            raise InputError("reference: the optical-flow gains are absolute; there is no reference pixel")
-        hit = np.flatnonzero((matrix.y == reference[0]) & (matrix.x == reference[1]))
-        if hit.size == 0:
-            raise InputError(f"reference: pixel {tuple(reference)} is not among the selected pixels")
-        ref = int(hit[0])
     seed = None
     if gains is not None:
         g = np.asarray(gains, dtype=float)
@@ -546,18 +552,9 @@ def estimate_sources(
     direction settles. `reference` scales each column as `estimate_gains` does."""
     from vibinverse.imaging.pixels import choose_bands, seed_bands
 
-    if iterations < 1:
-        raise InputError(f"iterations: {iterations}; allowed range [1, inf)")
-    if isinstance(reference, str) and reference not in REFERENCES:
-        raise InputError(f"reference: {reference!r}; allowed: {', '.join(map(repr, REFERENCES))} or a pixel (y, x)")
+    ref = reference_index(matrix, reference, iterations)
     levels = noise_levels(matrix)
     valid, mean, floor = levels.valid, levels.mean, levels.sigma
-    ref = None
-    if not isinstance(reference, str):
-        hit = np.flatnonzero((matrix.y == reference[0]) & (matrix.x == reference[1]))
-        if hit.size == 0:
-            raise InputError(f"reference: pixel {tuple(reference)} is not among the selected pixels")
-        ref = int(hit[0])
     seeds = seed_bands(matrix, levels, choose_bands(levels, matrix.n, count, bands=bands, centres=centres))
     convention = (
         "each source's gains relative to their SNR-weighted mean |gain| (sum of share x |gain| = 1)"
