@@ -20,10 +20,13 @@ Lines: per Fourier frequency, the largest z over all pixels; frequencies whose c
 false-alarm probability 1 - (1 - p)^{M P} is below `alpha` are lines, merged when at most
 `MERGE_GAP` = 2 bins apart (a strong line's sidelobes, a damped resonance's hump, which dips below
 the threshold between its bins; so lines closer than 4 / T are one), the strongest `max_lines`
-kept. A second pass takes every pixel's z within one bin of each line (the SNR map): the first
-pass keeps each pixel's fitted floor (`whitening.Floor`, n_windows + 4 numbers), so the second
-needs the powers at the lines' bins only, by a direct DFT at those bins on uniform stamps
-(`whitening.dft_power`: one matrix product per slab of frames; no whole transform, no whitening).
+kept. Then every pixel's z within one bin of each line (the SNR map): the first pass keeps each
+pixel's fitted floor (`whitening.Floor`, n_windows + 4 numbers), so only the powers at the lines'
+bins are needed. When every pixel's powers fit in a quarter of `memory` (float64, n_freq per pixel:
+half a float64 cube), the first pass keeps them and they are taken from there (the cube is read
+once); else a second pass reads the cube again for them, by a direct DFT at those bins on uniform
+stamps (`whitening.dft_power`: one matrix product per slab of frames; no whole transform, no
+whitening).
 A pixel carries a line when its p-value there (corrected for the <= 3 bins) passes the
 Benjamini-Hochberg procedure over all pixels at level `alpha` (expected fraction of false pixels
 <= alpha). Clusters are the connected components (8-neighbours, scipy.ndimage.label) of the
@@ -37,14 +40,15 @@ record), where drifts and their leakage live. A rolling shutter's per-row time o
 never its power, and is ignored here.
 
 Chunks: the time axis whole, the frame cut into spatial blocks so that the blocks in flight and
-their float64 work fit `memory` bytes (`plan_chunks`), each of at most `BLOCK_BYTES`. A cube whose
-time axis is split in chunks (video frames, netCDF read by frames) is read block by block (each
-block's reads are its own tasks, so only its pixels are held), never rechunked whole. The second
-pass reads the frames again in slabs (`SLAB_BYTES`, whole frames: the cheapest reads) and adds up
-the DFT sums of each slab. Integer counts (decoded video, MRAW and TIFF frames, whose reads decode
-whole frames, so that each block's read decodes the whole recording) are read once and kept for
-the second pass when they fit in a quarter of `memory`; float cubes (netCDF, zarr, npy, read by
-hyperslab) are read again, which costs less than holding them.
+their float64 work fit `memory` bytes less the kept spectra (`plan_chunks`), each of at most
+`BLOCK_BYTES`. A cube whose time axis is split in chunks (video frames, netCDF read by frames) is
+read block by block (each block's reads are its own tasks, so only its pixels are held), never
+rechunked whole. A second pass (spectra not kept) reads the frames again in slabs (`SLAB_BYTES`,
+whole frames: the cheapest reads) and adds up the DFT sums of each slab. Integer counts (decoded
+video, MRAW and TIFF frames, whose reads decode whole frames, so that each block's read decodes the
+whole recording) are read once and kept for that pass when they fit in a quarter of `memory`;
+float cubes (netCDF, zarr, npy, read by hyperslab) are read again, which costs less than holding
+them.
 
 No equation of the paper is used here (the paper stops at the sensitivity, eq. 21; sec. 5 asks for
 combining pixels, which this map prepares).
@@ -136,12 +140,15 @@ def _refined(power: np.ndarray, idx: np.ndarray, n_freq: int) -> np.ndarray:
     return np.where(i == idx, refine(log_p), 0.0)
 
 
-def first_pass(block: Any, grid: FrequencyGrid, batch: int) -> dict[str, Any]:
+def first_pass(block: Any, grid: FrequencyGrid, batch: int, keep: bool = False) -> dict[str, Any]:
     """A block (time, y, x; or its time pieces, a list) -> its maps (peak bin, peak frequency,
     peak SNR, mean frame; (y, x)), the largest z over its pixels at each frequency of the band, and
-    its pixels' floors ("floor", a `Floor` over the block's pixels, for the second pass)."""
+    its pixels' floors ("floor", a `Floor` over the block's pixels, for the second pass); with
+    `keep`, also its pixels' powers ("power", (pixels, n_freq)), from which the second pass takes
+    the powers at the lines' bins without reading the block again."""
     ny, nx = (block[0] if isinstance(block, (list, tuple)) else block).shape[1:]
     npix = ny * nx
+    kept = np.empty((npix, grid.n_freq)) if keep else None
     peak_bin = np.zeros(npix, dtype=np.int64)
     peak_f = np.zeros(npix)
     peak_z = np.zeros(npix)
@@ -160,6 +167,8 @@ def first_pass(block: Any, grid: FrequencyGrid, batch: int) -> dict[str, Any]:
         mean[sl] = m
         coef[sl], scale[sl] = floor.coef, floor.scale
         np.maximum(zmax, z.max(axis=0), out=zmax)
+        if kept is not None:
+            kept[sl] = power
     shape = (ny, nx)
     return {
         "peak_bin": peak_bin.reshape(shape),
@@ -168,6 +177,7 @@ def first_pass(block: Any, grid: FrequencyGrid, batch: int) -> dict[str, Any]:
         "mean_frame": mean.reshape(shape),
         "band_max": zmax,
         "floor": Floor(coef, scale),
+        "power": kept,
     }
 
 
@@ -593,8 +603,13 @@ def detection_map(
     _, ny, nx = cube.shape
     n_pixels = ny * nx
     # dask's threads run the blocks in parallel: BLAS threads inside them would only contend
+    # the pixels' powers are kept from the first pass for the second when they fit in a quarter of
+    # `memory` (the rest bounds the blocks in flight); else the second pass reads the cube again
+    spectra = n_pixels * grid.n_freq * 8
+    keep_spectra = spectra <= int(memory) // 4
     with session(scheduler, workers, progress=progress) as run, threadpool_limits(1, user_api="blas"):
-        plan = plan_chunks(cube.shape, cube.dtype.itemsize, run.threads, int(memory), grid.uniform)
+        budget = int(memory) - (spectra if keep_spectra else 0)
+        plan = plan_chunks(cube.shape, cube.dtype.itemsize, run.threads, budget, grid.uniform)
         if cube.chunks is None:  # in memory or a lazy file backend: each block reads its own hyperslab
             data = cube.chunk({"time": -1, "y": plan.block_y, "x": plan.block_x}).data
         else:
@@ -609,7 +624,7 @@ def detection_map(
             arrays = run.persist(*[b for _, _, b in blocks])
             blocks = [(ys, xs, a) for (ys, xs, _), a in zip(blocks, arrays)]
             logger.debug(f"detect: cube read and kept in {time.perf_counter() - clock:.2f} s")
-        first = run.compute(*[_delayed(first_pass)(_pieces(b), grid, plan.batch) for _, _, b in blocks])
+        first = run.compute(*[_delayed(first_pass)(_pieces(b), grid, plan.batch, keep_spectra) for _, _, b in blocks])
         logger.debug(f"detect: first pass (peaks) {time.perf_counter() - clock:.2f} s")
         maps = {
             k: np.zeros((ny, nx), dtype=first[0][k].dtype)
@@ -629,10 +644,18 @@ def detection_map(
         snr = np.zeros((len(bins), ny, nx))
         freq = np.zeros((len(bins), ny, nx))
         if bins:
-            power = _line_powers(run, data, blocks, grid, line_bins(grid, bins)[1], plan, maps["mean_frame"], memory)
+            cols = line_bins(grid, bins)[1]
+            if keep_spectra:  # the powers at the lines' bins, from the first pass's
+                power = np.zeros((ny, nx, cols.size))
+                for (ys, xs, _), part in zip(blocks, first):
+                    power[ys, xs] = part["power"][:, cols].reshape(power[ys, xs].shape)
+                power = power.reshape(n_pixels, -1)
+            else:
+                power = _line_powers(run, data, blocks, grid, cols, plan, maps["mean_frame"], memory)
             floor = Floor(coef.reshape(n_pixels, -1), scale.reshape(n_pixels, -1))
             snr, freq = (m.reshape(len(bins), ny, nx) for m in line_maps(power, floor, grid, bins))
-            logger.debug(f"detect: second pass (SNR maps of {len(bins)} lines) {time.perf_counter() - clock:.2f} s")
+            how = "from the kept spectra" if keep_spectra else "second pass"
+            logger.debug(f"detect: SNR maps of {len(bins)} lines, {how}: {time.perf_counter() - clock:.2f} s")
     log_p = log_tail(maps["peak_snr"], grid.half_width)
     pixel_fap = corrected(log_p, grid.n_searched)
     fap = corrected(log_p, grid.n_searched * n_pixels)

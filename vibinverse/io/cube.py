@@ -29,6 +29,7 @@ from vibinverse.io.series import UNIFORM_RTOL, netcdf_format
 from vibinverse.io.video import (
     ChannelFrames,
     FrameSource,
+    MappedFrames,
     first_line,
     need,
     npy_frames,
@@ -453,12 +454,12 @@ def _read_netcdf(p: Path, variable: str | None, channel: str) -> RawCube:
     return _read_xarray(p, variable, "h5netcdf" if hdf5 else "scipy", mapped if hdf5 else None)
 
 
-def mapped(p: Path, name: str) -> np.memmap | None:
-    """An HDF5 (netCDF-4) variable's values mapped from the file, in its stored order, when HDF5
-    keeps it contiguous and uncompressed and xarray would not transform its values (no scale or
-    offset; no fill value to mask, or NaN in a float variable, which masks to itself): the values
-    xarray reads, without the per-read overhead and copy of its HDF5 stack (a detection reads
-    every pixel twice). None otherwise."""
+def mapped(p: Path, name: str) -> MappedFrames | None:
+    """An HDF5 (netCDF-4) variable's values mapped from the file (`MappedFrames`, in its stored
+    order), when HDF5 keeps it contiguous and uncompressed and xarray would not transform its
+    values (no scale or offset; no fill value to mask, or NaN in a float variable, which masks to
+    itself): the values xarray reads, without the per-read overhead and copy of its HDF5 stack (a
+    detection reads every pixel twice). None otherwise."""
     import h5py
 
     with h5py.File(p, "r") as f:
@@ -476,7 +477,7 @@ def mapped(p: Path, name: str) -> np.memmap | None:
         if ds.dtype.kind not in "uif" or (ds.dtype.byteorder not in "=<|" and ds.dtype.itemsize > 1):
             return None
         shape, dtype = ds.shape, ds.dtype
-    return np.memmap(p, mode="r", dtype=dtype, offset=int(offset), shape=shape)
+    return MappedFrames(p, int(offset), tuple(shape), dtype)
 
 
 def _read_zarr(p: Path, variable: str | None, channel: str) -> RawCube:
@@ -508,10 +509,12 @@ def _read_xarray(
     if var.ndim != 3:
         raise DataError(f"input: {p}: variable {name!r} has shape {tuple(var.shape)}; a cube (time, y, x) is needed")
     direct = mapper(p, name) if mapper is not None else None
-    if direct is not None and direct.shape == var.shape:
-        var = var.copy(data=direct)
     tdim = _time_dim(var)
     ydim, xdim = (d for d in var.dims if d != tdim)
+    if direct is not None and direct.shape == var.shape:  # the map, its axes as (time, y, x)
+        direct = direct.with_axes(tuple(var.dims.index(d) for d in (tdim, ydim, xdim)))
+    else:
+        direct = None
     tcoord = next((var[c] for c in ("time", tdim) if c in var.coords and var[c].dims == (tdim,)), None)
     time, reference = _seconds(tcoord, p) if tcoord is not None else (None, None)
     var = var.drop_vars([c for c in {"time", tdim} if c in var.coords]).transpose(tdim, ydim, xdim)
@@ -521,7 +524,7 @@ def _read_xarray(
     stored = preferred or (var.encoding.get("chunksizes") or var.encoding.get("chunks") or (None,))[0]
     coords = {str(k): c.variable for k, c in var.coords.items()}
     return RawCube(
-        var.variable,
+        direct if direct is not None else var.variable,
         time,
         nominal_fps=attrs.pop("nominal_fps", None),
         bit_depth=attrs.pop("bit_depth", None),

@@ -443,6 +443,37 @@ class NpyFrames(FrameSource):
         return np.array(np.load(self.path, mmap_mode="r")[(slice(lo, hi), *rest)])
 
 
+class MappedFrames(FrameSource):
+    """An array stored contiguous and uncompressed at byte `offset` of a file (an HDF5 dataset),
+    memory-mapped anew by each read, its axes taken in the order `axes` (time first). A read
+    returns a view of the map: no copy (the pages are read when the values are used), and, unlike
+    a memory map handed to dask whole, nothing is hashed or copied when the dask array is built."""
+
+    def __init__(
+        self, path: Path, offset: int, stored: tuple[int, ...], dtype: np.dtype, axes: tuple[int, ...] | None = None
+    ):
+        self.path, self.offset, self.stored, self.dtype = path, int(offset), tuple(stored), np.dtype(dtype)
+        self.axes = tuple(axes) if axes is not None else tuple(range(len(self.stored)))
+        self.shape = tuple(self.stored[a] for a in self.axes)
+
+    def with_axes(self, axes: tuple[int, ...]) -> MappedFrames:
+        """The same stored array, its axes taken in the order `axes`."""
+        return MappedFrames(self.path, self.offset, self.stored, self.dtype, axes)
+
+    @property
+    def token(self) -> tuple:
+        return ("mapped", self.offset, self.stored, str(self.dtype), self.axes)
+
+    def read(self, lo: int, hi: int, rest: tuple) -> np.ndarray:
+        if self.axes[0] == 0:  # time stored first: map frames lo..hi only (FrameSource asks hi > lo)
+            frame = int(np.prod(self.stored[1:])) * self.dtype.itemsize
+            shape = (hi - lo, *self.stored[1:])
+            mm = np.memmap(self.path, mode="r", dtype=self.dtype, offset=self.offset + lo * frame, shape=shape)
+            return mm.transpose(self.axes)[(slice(None), *rest)]
+        mm = np.memmap(self.path, mode="r", dtype=self.dtype, offset=self.offset, shape=self.stored)
+        return mm.transpose(self.axes)[(slice(lo, hi), *rest)]
+
+
 def npy_frames(path: Path) -> NpyFrames:
     """The frames of a .npy array (its header only is read here)."""
     try:

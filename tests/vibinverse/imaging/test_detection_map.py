@@ -4,6 +4,7 @@ pixels that carry it (uniform or irregular stamps, 8-bit counts), chunking withi
 and a cube several times larger than the memory given to the process."""
 
 import json
+import logging
 import math
 import subprocess
 import sys
@@ -211,11 +212,12 @@ def test_row_offset_changes_nothing():
         assert np.array_equal(a[name].values, b[name].values), name
 
 
-def test_the_snr_maps_are_the_whitened_periodogram_at_the_lines_whichever_second_pass():
-    """The second pass's SNR map, by slabs of frames (float cube in memory) or by kept blocks (8-bit
-    counts read in time pieces), is each pixel's largest whitened power within one bin of the line,
-    as the whole computation (periodogram, then whitening) gives it: the same sums in another order
-    (rounding, < 1e-9)."""
+def test_the_snr_maps_are_the_whitened_periodogram_at_the_lines_whichever_second_pass(caplog):
+    """The second pass's SNR map, from the first pass's kept spectra (the default, when they fit in
+    a quarter of the memory), by slabs of frames (float cube in memory) or by kept blocks (8-bit
+    counts read in time pieces; both with 3 MiB, where the 1 MiB of spectra is not kept), is each
+    pixel's largest whitened power within one bin of the line, as the whole computation
+    (periodogram, then whitening) gives it: the same sums in another order (rounding, < 1e-9)."""
     rng = np.random.default_rng(15)
     nt, ny, nx = 1024, 12, 20
     t = np.arange(nt) / FS
@@ -223,16 +225,24 @@ def test_the_snr_maps_are_the_whitened_periodogram_at_the_lines_whichever_second
     counts = np.clip(np.round(analog), 0, 255).astype(np.uint8)
     grid = frequency_grid(t)
     z = whiten(periodogram(counts, grid), grid).reshape(grid.n_freq, ny, nx)
+    small = 3 * 2**20
+    caplog.set_level(logging.DEBUG, logger="vibinverse.imaging.detection_map")
     maps = [
-        detection_map(cube_of(counts.astype(np.float64), t), workers=2),  # aligned blocks: slabs
-        detection_map(cube_of(da.from_array(counts, chunks=(100, ny, nx)), t), workers=2),  # kept blocks
+        detection_map(cube_of(counts.astype(np.float64), t), workers=2),  # the spectra kept
+        detection_map(cube_of(counts.astype(np.float64), t), workers=2, memory=small),  # aligned blocks: slabs
+        detection_map(cube_of(da.from_array(counts, chunks=(100, ny, nx)), t), workers=2, memory=small),  # kept blocks
     ]
     for result in maps:
         (line,) = result.lines
         b = round(line.bin_frequency / grid.df) - 1
         np.testing.assert_allclose(result.maps["snr"].values[0], z[b - 1 : b + 2].max(axis=0), rtol=1e-9)
         assert line.snr == result.maps["snr"].values[0].max()
-    np.testing.assert_allclose(maps[0].maps["peak_frequency"].values, maps[1].maps["peak_frequency"].values, rtol=1e-12)
+    how = [r.getMessage().split(", ")[-1].split(":")[0] for r in caplog.records if "SNR maps of" in r.getMessage()]
+    assert how == ["from the kept spectra", "second pass", "second pass"]
+    for other in maps[1:]:
+        np.testing.assert_allclose(
+            maps[0].maps["peak_frequency"].values, other.maps["peak_frequency"].values, rtol=1e-12
+        )
 
 
 # ------------------------------------------------------------------------------ chunks and memory

@@ -425,6 +425,7 @@ def test_a_contiguous_netcdf4_cube_is_mapped_and_reads_the_same_values(tmp_path)
     overhead): the values equal xarray's own read exactly, NaN included. A compressed cube, or
     integer counts with a fill value (which xarray masks), keep the xarray path."""
     from vibinverse.io.cube import mapped
+    from vibinverse.io.video import MappedFrames
 
     rng = np.random.default_rng(2)
     a = rng.random((50, 6, 5))
@@ -433,9 +434,19 @@ def test_a_contiguous_netcdf4_cube_is_mapped_and_reads_the_same_values(tmp_path)
     xr.Dataset({"intensity": (("time", "y", "x"), a)}, coords={"time": np.arange(50) * 0.01}).to_netcdf(
         path, engine="h5netcdf"
     )
-    assert isinstance(mapped(path, "intensity"), np.memmap)
+    assert isinstance(mapped(path, "intensity"), MappedFrames)
     got = open_cube(path)
     np.testing.assert_array_equal(got.values, a)
+    np.testing.assert_array_equal(got[7:31, 1:4, 2].values, a[7:31, 1:4, 2])  # a read of a region
+    # the dask array is built without hashing or copying the values: its chunks read the file
+    assert not any(isinstance(v, np.ndarray) and v.size > 1 for v in dict(got.data.dask).values())
+    # stored (x, time, y): time comes first, the other axes in their stored order (as xarray's read)
+    swapped = tmp_path / "swapped.nc"
+    xr.Dataset(
+        {"intensity": (("x", "time", "y"), a.transpose(2, 0, 1))}, coords={"time": np.arange(50) * 0.01}
+    ).to_netcdf(swapped, engine="h5netcdf")
+    assert mapped(swapped, "intensity").shape == (5, 50, 6)
+    np.testing.assert_array_equal(open_cube(swapped).values, a.transpose(0, 2, 1))
     packed = tmp_path / "packed.nc"
     counts = rng.integers(0, 255, (50, 6, 5)).astype(np.uint8)
     xr.Dataset({"intensity": (("time", "y", "x"), counts)}, coords={"time": np.arange(50) * 0.01}).to_netcdf(
