@@ -162,6 +162,18 @@ def predictive(posterior: Posterior, values: dict[str, float], draws: np.ndarray
     if draws is not None and len(draws):
         rng = np.random.default_rng(0)
         pick = draws[rng.choice(len(draws), size=min(100, len(draws)), replace=False)]
-        curves = np.array([model.mean(dict(zip(posterior.space.names, d))) for d in pick])
-        out["model_q05"], out["model_q95"] = np.percentile(curves, [5, 95], axis=0)
+        first = model.mean(dict(zip(posterior.space.names, pick[0])))
+        curves = np.empty((len(pick), first.size))
+        curves[0] = first
+        for i, d in enumerate(pick[1:], start=1):
+            curves[i] = model.mean(dict(zip(posterior.space.names, d)))
+        q05, q95 = np.empty(first.size), np.empty(first.size)
+        for a in range(0, first.size, PERCENTILE_COLUMNS):  # np.percentile copies: a slice at a time
+            q05[a : a + PERCENTILE_COLUMNS], q95[a : a + PERCENTILE_COLUMNS] = np.percentile(
+                curves[:, a : a + PERCENTILE_COLUMNS], [5, 95], axis=0
+            )
+        out["model_q05"], out["model_q95"] = q05, q95
     return out
+
+
+PERCENTILE_COLUMNS = 65536  # the predictive band's percentiles, samples at a time (a long record's copy)
