@@ -1,10 +1,19 @@
 """Derivative-free maximum a posteriori (Nelder-Mead -> BFGS) with restarts, and the Laplace
 covariance from a finite-difference Hessian at the optimum: the fallback of the casadi MAP, for
-any model."""
+any model.
+
+The Hessian's steps are a tenth of each parameter's conditional sd (`laplace_steps`), not a fixed
+fraction of z: a fixed step of 1e-4 |z| is a fixed step of a line's frequency (2e-3 Hz at 200 Hz
+sampling), while the range over which the likelihood is quadratic in it shrinks as 1 / span; on a
+100 s record the step was 0.2 / span, the frequency-phase cross difference no longer saw a
+quadratic, and the Laplace sds of the frequency and the phase came out 17 % narrow (the exact
+posterior, by importance sampling, agreed with the tenth-of-an-sd steps to 0.5 %)."""
 
 from __future__ import annotations
 
+import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,6 +43,23 @@ def hessian(f, z: np.ndarray, steps: np.ndarray) -> np.ndarray:
     return h
 
 
+def laplace_steps(f: Callable[[np.ndarray], float], z: np.ndarray, first: np.ndarray | None = None) -> np.ndarray:
+    """Steps for the central-difference Hessian of f at its minimum z: a first pass with steps
+    `first` (default 1e-4 max(1, |z|)) gives each coordinate's curvature c_i, the step is then
+    0.1 / sqrt(c_i), a tenth of its conditional sd (where f changes by 0.005: a quadratic there,
+    and far above rounding); `first` where c_i is not positive and finite."""
+    first = 1e-4 * np.maximum(1.0, np.abs(z)) if first is None else np.asarray(first, dtype=float)
+    f0 = f(z)
+    steps = first.copy()
+    for i in range(z.size):
+        e = np.zeros(z.size)
+        e[i] = first[i]
+        curv = (f(z + e) - 2 * f0 + f(z - e)) / first[i] ** 2
+        if curv > 0 and math.isfinite(curv):
+            steps[i] = 0.1 / math.sqrt(curv)
+    return steps
+
+
 @dataclass(frozen=True)
 class MapPoint:
     """A MAP in the samplers' unconstrained space: the point z, the Laplace covariance cov_z (the
@@ -48,7 +74,7 @@ class MapPoint:
 
 def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed: int = 0) -> MapPoint:
     """MAP in the unconstrained space from `start` and jittered restarts; Laplace covariance from a
-    central-difference Hessian."""
+    central-difference Hessian with steps of a tenth of each parameter's sd (`laplace_steps`)."""
     rng = np.random.default_rng(seed)
     neg = lambda z: -problem.log_posterior(z) if np.all(np.isfinite(z)) else np.inf
     z0 = problem.space.to_z(start)
@@ -65,8 +91,7 @@ def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed
         if best is None or res.fun < best.fun:
             best = res
     z = best.x
-    steps = 1e-4 * np.maximum(1.0, np.abs(z))
-    h = hessian(neg, z, steps)
+    h = hessian(neg, z, laplace_steps(neg, z))
     ok = True
     try:
         cov = np.linalg.inv(h)

@@ -553,6 +553,12 @@ def _root(cov: np.ndarray) -> np.ndarray:
     return (vec * np.sqrt(np.clip(lam, 0.0, None))[..., None, :]) @ np.swapaxes(vec, -1, -2)
 
 
+def wrap_phase(phase: float) -> float:
+    """A phase (rad) wrapped into [-pi, pi); 0 when it is not finite."""
+    p = float(phase)
+    return (p + math.pi) % (2.0 * math.pi) - math.pi if math.isfinite(p) else 0.0
+
+
 # ------------------------------------------------------------------ spectra (starts, the order search)
 
 
@@ -943,12 +949,14 @@ class ModalModel(SignalModel):
         return parameter_units(name, iu)
 
     def default_priors(self) -> dict[str, Prior]:
-        """Frequencies uniform from MIN_CYCLES (1) cycle per record (the least `check_fit` accepts) to Nyquist;
-        damping ratios log-uniform 1e-4..0.9; mode rms log-uniform sd x (1e-4, 10); line amplitudes
-        uniform 0..3 sd; phases uniform(-pi, pi); level uniform over the data's range widened by it
-        on each side; noise.sigma and the coloured noise's rms log-uniform sd x (1e-6, 10); ar.time
-        log-uniform (dt / 5, span); drift.rate log-uniform sd / sqrt(span) x (1e-5, 30); the gain
-        drift's coefficients uniform (-0.5, 0.5). (sd: the data's standard deviation.)"""
+        """Frequencies uniform from MIN_CYCLES (1) cycle per record (the least `check_fit` accepts)
+        to Nyquist; damping ratios log-uniform 1e-4..0.9; mode rms log-uniform sd x (1e-4, 10); line
+        amplitudes uniform 0..3 sd; phases uniform over a period centred on the start's (the order
+        search's optimum, else the first spectral guess); level uniform over the data's range
+        widened by it on each side; noise.sigma and the coloured noise's rms log-uniform
+        sd x (1e-6, 10); ar.time log-uniform (dt / 5, span); drift.rate log-uniform
+        sd / sqrt(span) x (1e-5, 30); the gain drift's coefficients uniform (-0.5, 0.5).
+        (sd: the data's standard deviation.)"""
         sd, span, nyq = self.sd, max(self.span, self.dt), 0.5 * self.series.fs
         lo = MIN_CYCLES / span * (1.0 + 1e-9)  # past rounding (`check_resolves`)
         ymin, ymax = float(np.nanmin(self.y)), float(np.nanmax(self.y))
@@ -961,7 +969,13 @@ class ModalModel(SignalModel):
         for j in range(self.spec.lines):
             out[f"lines[{j}].frequency"] = Prior("uniform", (lo, nyq))
             out[f"lines[{j}].amplitude"] = Prior("uniform", (0.0, 3.0 * sd))
-            out[f"lines[{j}].phase"] = Prior("uniform", (-math.pi, math.pi))
+            # a full period, centred on the start's phase (the order search's optimum, else the first
+            # spectral guess): the same prior on the circle, but the MAP is not pinned at a window's
+            # edge by the logit's Jacobian (in 8 %
+            # of the bench's clean records the phase lay within 2 sd of +-pi, and the frequency,
+            # correlated with it at -0.87, came out with intervals 11 % narrow, coverage 0.84)
+            centre = wrap_phase(self.value({}, f"lines[{j}].phase"))
+            out[f"lines[{j}].phase"] = Prior("uniform", (centre - math.pi, centre + math.pi))
         if self.spec.drift != "none":
             scale = sd / math.sqrt(span) / (span if self.spec.drift == "integrated" else 1.0)
             out["drift.rate"] = Prior("loguniform", (1e-5 * scale, 30.0 * scale))
