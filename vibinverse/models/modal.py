@@ -68,7 +68,7 @@ import numpy as np
 
 from vibinverse.errors import SceneError
 from vibinverse.io.series import MIN_CYCLES, Series, evenly_spaced
-from vibinverse.kalman import njit, unique_steps
+from vibinverse.kalman import gain_change, is_calm, njit, unique_steps
 from vibinverse.models.base import (
     LineTest,
     SignalModel,
@@ -84,8 +84,6 @@ DRIFT_KINDS = ("none", "walk", "integrated")
 FLICKER_DECADES = (1.0, 0.1, 0.01)  # correlation times, x span / (2 pi)
 GAIN_TERMS = 6  # the gain drift's cosines: 0.5 to 3 cycles per record
 GAIN_LIMIT = 0.5  # each coefficient's prior: uniform (-limit, limit)
-FREEZE_TOL = 1e-14  # the filter holds its gain once the covariance has converged to this (relative)
-FREEZE_ROUNDING = 1e-15  # a relative change this small is rounding: it counts as converged
 
 _OSC, _WALK, _IWALK, _OU = 0, 1, 2, 3
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -360,8 +358,9 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, ns
     Writes the standardized innovations to `white` and each sample's log density to `lls` when
     they are not empty (NaN at gaps). With `freeze` = m > 0, the gain and the innovation variance
     are held once they have stopped changing over m consecutive observed samples of the same step
-    (each change, extrapolated geometrically, below FREEZE_TOL of their scale, or at rounding: the
-    Riccati recursion's fixed point to rounding), until a gap or another step (module docstring).
+    (`kalman.is_calm`: each change, extrapolated geometrically, below FREEZE_TOL of their scale,
+    or at rounding: the Riccati recursion's fixed point to rounding), until a gap or another step
+    (module docstring).
     m spans the slowest mode's period: with lightly damped modes the recursion converges with
     an oscillation, whose changes dip towards 0 twice a period long before it has converged; a
     test on one pair of samples then held a gain 0.003 off in log-likelihood, and the likelihood
@@ -482,20 +481,8 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, ns
             white[k] = v / math.sqrt(s)
         if freeze:
             if have_prev and u == prev_u:
-                scale = 0.0
-                for i in range(n):
-                    scale = max(scale, abs(ph[i] / s))
-                delta = abs(s - prev_s) / s
-                for i in range(n):
-                    d = abs(ph[i] / s - prev_gain[i])
-                    if d > 0.0:
-                        delta = max(delta, d / scale)
-                if delta <= FREEZE_ROUNDING or (
-                    delta < last_delta < np.inf and delta * delta <= FREEZE_TOL * (last_delta - delta)
-                ):
-                    calm += 1
-                else:
-                    calm = 0
+                delta = gain_change(ph, s, prev_gain, prev_s)
+                calm = calm + 1 if is_calm(delta, last_delta) else 0
                 if calm >= freeze:
                     calm = 0
                     frozen = True
