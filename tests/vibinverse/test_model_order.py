@@ -190,7 +190,7 @@ def test_a_trend_is_a_drift_not_a_slow_mode(seed):
     mode at 0.05 Hz (1 cycle per record) for the trend, on 2 of 12 seeds (these two). The exchange
     move (a mode of under 3 cycles, or of damping > 0.5, for a random-walk drift) and no split of
     such a mode end with the true mode and line only."""
-    from vibinverse.bench.robustness_bench import simulate as bench_simulate
+    from vibinverse.bench.robustness_cases import simulate as bench_simulate
 
     d = bench_simulate("drift", seed)
     res = choose_order(vi.series(d.time, d.intensity))
@@ -203,7 +203,7 @@ def test_a_slow_level_change_is_not_kept_as_a_line():
     cycles per record): the search had kept a line at 0.08 Hz (1.6 cycles in 20 s) for the level's
     change; the exchange move (a line of under 3 cycles for a random-walk drift or a gain drift)
     leaves the true line only."""
-    from vibinverse.bench.robustness_bench import simulate as bench_simulate
+    from vibinverse.bench.robustness_cases import simulate as bench_simulate
 
     d = bench_simulate("gain_drift", 14)
     res = choose_order(vi.series(d.time, d.intensity))
@@ -366,7 +366,7 @@ def test_a_gain_drift_is_not_read_as_a_slow_line():
     gain drift's BIC. Read as a gain, the 3.46 Hz mode's and the 10 Hz line's amplitudes would
     follow it by +-19 %, too little to tell under noise 0.6 (expected ln L ratio ~1): undecided,
     a slow variation, exchanged for a gain drift. The true mode and line are found, nothing else."""
-    from vibinverse.bench.robustness_bench import simulate as bench_simulate
+    from vibinverse.bench.robustness_cases import simulate as bench_simulate
 
     d = bench_simulate("gain_drift", 10)
     res = choose_order(vi.series(d.time, d.intensity))
@@ -381,7 +381,7 @@ def test_a_gain_drift_is_not_read_as_a_slow_mode():
     """The bench's gain-drift case, seed 12 at half the record (10 s, ~11 s): the search kept a
     lightly damped mode at 0.18 Hz (1.8 cycles) for the level's change; a mode of under 3 cycles
     is now also exchanged for a gain drift, which lowers the BIC."""
-    from vibinverse.bench.robustness_bench import simulate as bench_simulate
+    from vibinverse.bench.robustness_cases import simulate as bench_simulate
 
     d = bench_simulate("gain_drift", 12, quick=True)
     res = choose_order(vi.series(d.time, d.intensity))
@@ -397,7 +397,7 @@ def test_a_line_next_to_a_resonance_is_found_with_the_mode_refitted():
     so the line is refitted in full and kept. Before, with the mode held, the search ended with one
     mode at 3.707 Hz and no line. Tolerances: 1 % on the mode (its sd ~0.5 % over 20 s), 1e-2 Hz
     on the line (sd ~2e-3 Hz)."""
-    from vibinverse.bench.robustness_bench import simulate
+    from vibinverse.bench.robustness_cases import simulate
 
     data = simulate("near_drive", 3)
     result = choose_order(vi.series(data.time, data.intensity))

@@ -346,7 +346,7 @@ def test_a_line_whose_phase_lies_near_pi_keeps_its_frequency_interval():
     correlation (-0.87), the frequency's sd came out 1.65e-3 Hz with the truth 3.4 sd away. Centred
     on the spectral guess's phase, the window puts the MAP in its middle: the sd is the
     Cramer-Rao bound's 2.47e-3 Hz (unknown phase) within 10 %, and the truth within 2.5 sd."""
-    from vibinverse.bench.robustness_bench import simulate
+    from vibinverse.bench.robustness_cases import simulate
 
     data = simulate("clean", 332)
     table = {"modal": {"modes": 1, "lines": 1, "drift": "none", "noise": "white", "gain": 0}}
