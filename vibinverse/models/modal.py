@@ -961,7 +961,8 @@ class ModalModel(SignalModel):
             # edge by the logit's Jacobian (in 8 %
             # of the bench's clean records the phase lay within 2 sd of +-pi, and the frequency,
             # correlated with it at -0.87, came out with intervals 11 % narrow, coverage 0.84)
-            centre = wrap_phase(self.value({}, f"lines[{j}].phase"))
+            centre = self.value({}, f"lines[{j}].phase")  # not wrapped: the start stays at the centre
+            centre = centre if math.isfinite(centre) else 0.0
             out[f"lines[{j}].phase"] = Prior("uniform", (centre - math.pi, centre + math.pi))
         if self.spec.drift != "none":
             scale = sd / math.sqrt(span) / (span if self.spec.drift == "integrated" else 1.0)
