@@ -155,6 +155,17 @@ def is_calm(delta, last_delta):  # pragma: no cover - compiled; tested through t
 
 
 @njit(cache=True, fastmath=False, nogil=True)
+def held_update(x, h, gain, yk):  # pragma: no cover - compiled; tested through the filters
+    """A step with the held gain: the innovation v = yk - h . x, and x += gain v in place; returns v."""
+    v = yk
+    for i in range(x.shape[0]):
+        v -= h[i] * x[i]
+    for i in range(x.shape[0]):
+        x[i] += gain[i] * v
+    return v
+
+
+@njit(cache=True, fastmath=False, nogil=True)
 def filter_steps(
     y, phis, qs, idx, h, r, p0, white, lls, freeze
 ):  # pragma: no cover - compiled; checked against the reference
@@ -206,11 +217,7 @@ def filter_steps(
                 have_prev = False
                 last_delta = np.inf
             if frozen:
-                v = yk
-                for i in range(n):
-                    v -= h[i] * x[i]
-                for i in range(n):
-                    x[i] += gain[i] * v
+                v = held_update(x, h, gain, yk)
                 lk = log_norm - 0.5 * v * v * inv_sf
                 ll += lk
                 if lls.shape[0]:

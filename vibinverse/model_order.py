@@ -365,7 +365,7 @@ def screen(series: Series, current: OrderFit, c: Candidate) -> tuple[Candidate, 
     return replace(c, starts=[st]), ll - current.log_likelihood
 
 
-def _renumber(values: dict[str, float], kind: str, drop: int, count: int) -> dict[str, float]:
+def renumber(values: dict[str, float], kind: str, drop: int, count: int) -> dict[str, float]:
     """`values` without component `drop` of `kind` ("modes" or "lines"), the later ones shifted down."""
     out = {n: v for n, v in values.items() if not n.startswith(f"{kind}[")}
     for i, j in enumerate(k for k in range(count) if k != drop):
@@ -394,7 +394,7 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
     if search["modes"]:
         for i in range(spec.modes):
             f = values[f"modes[{i}].frequency"]
-            start = _renumber(values, "modes", i, spec.modes)
+            start = renumber(values, "modes", i, spec.modes)
             out.append(move(f"remove the mode at {f:.4g} Hz", replace(spec, modes=spec.modes - 1), [start]))
             slow = f * span < FEW_CYCLES or values[f"modes[{i}].damping_ratio"] > SLOW_DAMPING
             if slow and search["drift"] and spec.drift == "none":
@@ -419,7 +419,7 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
     if search["lines"]:
         for j in range(spec.lines):
             f = values[f"lines[{j}].frequency"]
-            start = _renumber(values, "lines", j, spec.lines)
+            start = renumber(values, "lines", j, spec.lines)
             out.append(move(f"remove the line at {f:.6g} Hz", replace(spec, lines=spec.lines - 1), [start]))
             if f * span >= FEW_CYCLES:
                 continue
@@ -529,7 +529,7 @@ def slow_reading(fit: OrderFit, series: Series, j: int, replicates: int = REPLIC
     if alone or not abs(level) > model.sd or not np.min(1.0 + shape) > 0.0:
         return SlowReading(j, f, cycles, 0.0, 0.0, "same")
     gain_spec = replace(spec, lines=spec.lines - 1, gain=1)
-    gain_values = {n: v for n, v in _renumber(values, "lines", j, spec.lines).items() if not n.startswith("gain.")}
+    gain_values = {n: v for n, v in renumber(values, "lines", j, spec.lines).items() if not n.startswith("gain.")}
     gain_values["gain.a1"] = 1.0
     gain_model = _shaped_gain(gain_spec, series, shape)
     ratio = gain_model.log_likelihood(gain_values) - fit.log_likelihood
@@ -556,7 +556,7 @@ def slow_exchanges(fit: OrderFit, series: Series, j: int, search: dict[str, bool
     gain that line and gain drift make together), and a random-walk drift."""
     spec, values, model = fit.spec, fit.values, fit.model
     f, a, ph = (values[f"lines[{j}].{k}"] for k in ("frequency", "amplitude", "phase"))
-    start = _renumber(values, "lines", j, spec.lines)
+    start = renumber(values, "lines", j, spec.lines)
     fewer = replace(spec, lines=spec.lines - 1)
     span = max(model.span, series.dt)
     out = []

@@ -148,21 +148,11 @@ ORACLE_LIKELIHOODS: dict[str, Callable[..., dict[tuple[str, int], float]]] = {
 }
 
 
-def _without(values: dict[str, float], kind: str, drop: int, count: int) -> dict[str, float]:
-    """The values without component `drop` of `kind`, the later ones renumbered down."""
-    out = {n: v for n, v in values.items() if not n.startswith(f"{kind}[")}
-    for new, old in enumerate(i for i in range(count) if i != drop):
-        for n, v in values.items():
-            if n.startswith(f"{kind}[{old}]."):
-                out[f"{kind}[{new}]." + n.split(".", 1)[1]] = v
-    return out
-
-
 def _refit_gains(case: Case, t: np.ndarray, parts: dict, truth: dict, model) -> dict[tuple[str, int], float]:
     """max ln L with each component - max ln L without it, both orders fitted by maximum likelihood
     (`vibinverse.model_order.fit_order`, the order search's) from the truth, on the data minus the
     known drift: the statistic the order search compares, its other components refitted."""
-    from vibinverse.model_order import fit_order
+    from vibinverse.model_order import fit_order, renumber
 
     values = _oracle_values(case, truth)
     spec = model.spec
@@ -171,7 +161,7 @@ def _refit_gains(case: Case, t: np.ndarray, parts: dict, truth: dict, model) -> 
     for kind, count in (("modes", spec.modes), ("lines", spec.lines)):
         fewer = replace(spec, **{kind: count - 1})
         for i in range(count):
-            out[kind, i] = full - fit_order(model.series, fewer, [_without(values, kind, i, count)]).log_likelihood
+            out[kind, i] = full - fit_order(model.series, fewer, [renumber(values, kind, i, count)]).log_likelihood
     return out
 
 

@@ -68,7 +68,7 @@ import numpy as np
 
 from vibinverse.errors import SceneError
 from vibinverse.io.series import MIN_CYCLES, Series, evenly_spaced
-from vibinverse.kalman import gain_change, is_calm, njit, unique_steps
+from vibinverse.kalman import gain_change, held_update, is_calm, njit, unique_steps
 from vibinverse.models.base import (
     LineTest,
     SignalModel,
@@ -406,6 +406,7 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, ns
     calm = 0  # consecutive samples that met the hold's test
     fu = -1
     sf = 1.0
+    log_norm = 0.0
     ll = 0.0
     u = 0
     for k in range(y.shape[0]):
@@ -428,12 +429,8 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, ns
                 have_prev = False
                 last_delta = np.inf
             if frozen:
-                v = yk
-                for i in range(n):
-                    v -= h[i] * x[i]
-                for i in range(n):
-                    x[i] += gain[i] * v
-                lk = -0.5 * (math.log(sf) + _LOG_2PI + v * v / sf)
+                v = held_update(x, h, gain, yk)
+                lk = log_norm - 0.5 * v * v / sf
                 ll += lk
                 if lls.shape[0]:
                     lls[k] = lk
@@ -488,6 +485,7 @@ def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, ns
                     frozen = True
                     fu = u
                     sf = s
+                    log_norm = -0.5 * (math.log(s) + _LOG_2PI)
                     for i in range(n):
                         gain[i] = ph[i] / s
                         for j in range(n):
