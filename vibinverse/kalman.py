@@ -362,6 +362,29 @@ _SERIES_TERMS = 20  # Taylor terms of g; g^2 grows at 2R: truncation (2 R t)^18 
 
 
 @njit(cache=True, fastmath=False, nogil=True)
+def _rate(w, a):  # pragma: no cover - compiled
+    """The largest rate of the oscillator's eigenvalues."""
+    return w if a <= w else a + math.sqrt(a * a - w * w)
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def _impulse_taylor(w, a):  # pragma: no cover - compiled
+    """Taylor coefficients g^(k)(0) / k!, k <= _SERIES_TERMS, of the impulse response g of
+    q'' + 2 a q' + w^2 q (g(0) = 0, g'(0) = 1)."""
+    nt = _SERIES_TERMS
+    c = np.zeros(nt + 1)
+    raw = np.zeros(nt + 1)
+    raw[1] = 1.0
+    fact = 1.0
+    for k in range(nt - 1):
+        raw[k + 2] = -2.0 * a * raw[k + 1] - w * w * raw[k]
+    for k in range(1, nt + 1):
+        fact *= k
+        c[k] = raw[k] / fact
+    return c
+
+
+@njit(cache=True, fastmath=False, nogil=True)
 def oscillator_fill(w, a, kappa, steps, phis, qs, b):  # pragma: no cover - compiled; tested against expm
     """Fill the 2 x 2 block at (b, b) of phis[u], qs[u] for every step steps[u]: the exact
     transition and process-noise covariance of x = (q, q'), q'' + 2 a q' + w^2 q = xi(t), xi white
@@ -376,18 +399,9 @@ def oscillator_fill(w, a, kappa, steps, phis, qs, b):  # pragma: no cover - comp
     (Q = P_inf - Phi P_inf Phi^T with P_inf = kappa diag(1 / (4 a w^2), 1 / (4 a)), divided out so
     that a -> 0 stays exact)."""
     b2 = w * w - a * a
-    rate = w if a <= w else a + math.sqrt(a * a - w * w)
+    rate = _rate(w, a)
     nt = _SERIES_TERMS
-    c = np.zeros(nt + 1)  # Taylor coefficients g^(k)(0) / k!
-    c[1] = 1.0
-    fact = 1.0
-    raw = np.zeros(nt + 1)
-    raw[1] = 1.0
-    for k in range(nt - 1):
-        raw[k + 2] = -2.0 * a * raw[k + 1] - w * w * raw[k]
-    for k in range(1, nt + 1):
-        fact *= k
-        c[k] = raw[k] / fact
+    c = _impulse_taylor(w, a)
     # g^2 = sum_n e_n s^n (n >= 2), exact up to n = nt + 1; Q11 / kappa = sum_n e_n t^(n+1) / (n + 1)
     coef = np.zeros(nt)
     for n in range(2, nt + 2):
@@ -431,6 +445,93 @@ def oscillator_fill(w, a, kappa, steps, phis, qs, b):  # pragma: no cover - comp
         qs[u, b, b + 1] = q12
         qs[u, b + 1, b] = q12
         qs[u, b + 1, b + 1] = 0.25 * kappa * (em + 2.0 * us * uc - 2.0 * a * us * us)
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def held_oscillator_fill(w, a, kappa, steps, frame, phis, qs, b):  # pragma: no cover - compiled; tested
+    """Fill the 2 x 2 block at (b, b) of phis[u], qs[u] for every step steps[u] of the oscillator
+    q'' + 2 a q' + w^2 q = u(t) whose force u is held over each frame of `frame` seconds at an
+    independent N(0, kappa / frame) value (a white force sampled at the frame rate, as the forward
+    model draws it: `forward.motion.frame.simulate_linear`; the same low-frequency intensity kappa
+    as `oscillator_fill`'s continuous noise). A step of m = round(step / frame) frames (dropped
+    frames) holds m values over m equal parts h = step / m:
+
+        Q(h) = kappa / h G G^T,  G = (integral of g over [0, h], g(h)),  Q(m h) = sum Phi(h)^j Q(h) Phi(h)^jT
+
+    (g the impulse response; its integral is (1 - Phi_11) / w^2, a Taylor series while R h < 1/2),
+    composed by squaring. Phi is `oscillator_fill`'s."""
+    oscillator_fill(w, a, 1.0, steps, phis, qs, b)
+    c = _impulse_taylor(w, a)
+    rate = _rate(w, a)
+    for u in range(steps.shape[0]):
+        m = max(1, math.floor(steps[u] / frame + 0.5))
+        h = steps[u] / m
+        one = np.zeros((1, 2, 2))
+        oscillator_fill(w, a, 1.0, np.array([h]), one, np.zeros((1, 2, 2)), 0)
+        f11, f12, f21, f22 = one[0, 0, 0], one[0, 0, 1], one[0, 1, 0], one[0, 1, 1]
+        g2 = f12  # g(h)
+        if rate * h < _SERIES_BELOW:  # integral of g: sum c[k] h^(k+1) / (k+1)
+            g1 = 0.0
+            for k in range(_SERIES_TERMS, 0, -1):
+                g1 = g1 * h + c[k] / (k + 1)
+            g1 *= h * h
+        else:
+            g1 = (1.0 - f11) / (w * w)
+        v = kappa / h
+        q11, q12, q22 = v * g1 * g1, v * g1 * g2, v * g2 * g2
+        # (Phi, Q) of m parts by squaring: (Pa, Qa) then (Pb, Qb) is (Pb Pa, Pb Qa Pb^T + Qb)
+        r11, r12, r21, r22, s11, s12, s22 = 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+        while m:
+            if m & 1:  # (R, S) then (F, Q)
+                t11 = f11 * s11 + f12 * s12
+                t12 = f11 * s12 + f12 * s22
+                t21 = f21 * s11 + f22 * s12
+                t22 = f21 * s12 + f22 * s22
+                s11 = t11 * f11 + t12 * f12 + q11
+                s12 = t11 * f21 + t12 * f22 + q12
+                s22 = t21 * f21 + t22 * f22 + q22
+                r11, r12, r21, r22 = (
+                    f11 * r11 + f12 * r21,
+                    f11 * r12 + f12 * r22,
+                    f21 * r11 + f22 * r21,
+                    f21 * r12 + f22 * r22,
+                )
+            m >>= 1
+            if m:  # (F, Q) then (F, Q)
+                t11 = f11 * q11 + f12 * q12
+                t12 = f11 * q12 + f12 * q22
+                t21 = f21 * q11 + f22 * q12
+                t22 = f21 * q12 + f22 * q22
+                q11, q12, q22 = t11 * f11 + t12 * f12 + q11, t11 * f21 + t12 * f22 + q12, t21 * f21 + t22 * f22 + q22
+                f11, f12, f21, f22 = (
+                    f11 * f11 + f12 * f21,
+                    f11 * f12 + f12 * f22,
+                    f21 * f11 + f22 * f21,
+                    f21 * f12 + f22 * f22,
+                )
+        qs[u, b, b] = s11
+        qs[u, b, b + 1] = s12
+        qs[u, b + 1, b] = s12
+        qs[u, b + 1, b + 1] = s22
+
+
+def held_stationary(phi: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The stationary covariance P = Phi P Phi^T + Q of a stable 2 x 2 step (the held force's
+    oscillator: `held_oscillator_fill`), by the 3 x 3 linear system of its distinct entries
+    (infinite when Phi is not stable, its spectral radius 1 to rounding: an undamped oscillator
+    under noise; a step decays by e^-1e-12 at least where a damping ratio of 1e-6 meets 0.02 Hz)."""
+    (f11, f12), (f21, f22) = phi
+    m = np.array(
+        [
+            [f11 * f11, 2 * f11 * f12, f12 * f12],
+            [f11 * f21, f11 * f22 + f12 * f21, f12 * f22],
+            [f21 * f21, 2 * f21 * f22, f22 * f22],
+        ]
+    )
+    if not np.all(np.abs(np.linalg.eigvals(phi)) < 1.0 - 1e-12):  # at 1 to rounding: undamped
+        return np.full((2, 2), np.inf) if np.any(q) else np.zeros((2, 2))
+    p11, p12, p22 = np.linalg.solve(np.eye(3) - m, [q[0, 0], q[0, 1], q[1, 1]])
+    return np.array([[p11, p12], [p12, p22]])
 
 
 def oscillator_tables(

@@ -1,22 +1,29 @@
 """The fitting pipeline: spectral -> SINDy -> MAP (casadi, else scipy) -> emcee, each stage seeding
-the next; `--method` stops it at a stage. A stage that fails is recorded and the chain goes on: a
-declined SINDy leaves the MAP to start from the spectral candidates, and a casadi MAP that does not
-cover the model or fails falls back to the derivative-free MAP. A model that cannot describe how the
-pixel sees the motion under any spectral reading (`check_observation`) stops the fit with a
-one-line DataError before any estimate is returned."""
+the next; `--method` stops it at a stage. A record longer than LONG_RECORD samples finds its MAP over
+growing stretches (`stretched_map`), and by default its posterior by importance sampling of the
+Laplace approximation (`estimators.importance`), emcee only when that fails its check.
+
+A stage that fails is recorded and the chain goes on: a declined SINDy leaves the MAP to start from
+the spectral candidates, and a casadi MAP that does not cover the model or fails falls back to the
+derivative-free MAP. A model that cannot describe how the pixel sees the motion under any spectral
+reading (`check_observation`) stops the fit with a one-line DataError before any estimate is
+returned."""
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
+import time
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 from forward.scene import format_bytes, memory_limit
 from vibinverse.detection import DETECTION_GAIN
 from vibinverse.errors import InputError, NumericalError, Unsupported
-from vibinverse.estimators import CasadiMap, Emcee, ScipyMap, SindyEstimator, SpectralEstimator
-from vibinverse.estimators.base import base_result
+from vibinverse.estimators import CasadiMap, Emcee, LaplaceImportance, ScipyMap, SindyEstimator, SpectralEstimator
+from vibinverse.estimators.base import base_result, complete
+from vibinverse.estimators.scipy_map import MapPoint, map_result, polish
 from vibinverse.io.series import check_resolves
 from vibinverse.posterior import Posterior
 from vibinverse.result import FitResult
@@ -107,6 +114,13 @@ def run(
     if method in ("map", "casadi"):
         best.timing = timing
         return best
+    if method == "auto" and posterior.series.time.size > LONG_RECORD:
+        try:
+            result = LaplaceImportance().fit(posterior, best, seed=seed, workers=workers)
+        except Unsupported as exc:
+            logger.info("%s; sampling with emcee", exc)
+        else:
+            return _finish(result, best, sindy, timing, "auto")
     result = Emcee().fit(
         posterior,
         best,
@@ -117,28 +131,44 @@ def run(
         max_steps=max_steps,
         progress=progress,
     )
+    return _finish(result, best, sindy, timing, "mcmc" if method == "mcmc" else "auto")
+
+
+def _finish(result: FitResult, best: FitResult, sindy: dict | None, timing: dict, method: str) -> FitResult:
+    """The sampling stage's result with every stage's seconds, the model facts of the MAP stage and
+    SINDy's diagnostics."""
     timing.update(result.timing)
     result.timing = timing
-    result.method = "mcmc" if method == "mcmc" else "auto"
+    result.method = method
     result.data = {**result.data, **({"model": best.data["model"]} if "model" in best.data else {})}
     if sindy is not None:
         result.diagnostics["sindy"] = sindy
     return result
 
 
+#: records longer than this many samples have their MAP found on a leading stretch of
+#: LONG_RECORD // STRETCH_GROWTH samples and carried to the whole record through stretches
+#: STRETCH_GROWTH times longer each (`stretched_map`)
+LONG_RECORD = 100_000
+STRETCH_GROWTH = 4
+
+
 def map_stage(posterior: Posterior, start: FitResult, method: str, seed: int) -> FitResult:
     """MAP from every candidate start: casadi + IPOPT with exact derivatives, except for method
     "map" (derivative-free scipy), which is also the fallback when casadi does not cover the model
     or fails. When the model changes its evaluation at the optimum (`SignalModel.refine`), the MAP
-    runs again from there."""
+    runs again from there. A record longer than LONG_RECORD samples goes through `stretched_map`."""
+    if posterior.series.time.size > LONG_RECORD:
+        try:
+            return stretched_map(posterior, start, method, seed)
+        except Unsupported as exc:
+            logger.info("the MAP runs on the whole record: %s", exc)
     result = _alternatives(posterior, _map(posterior, start, method, seed), method, seed)
     facts, message = posterior.model.refine(result.point)
     if message:
         logger.info("%s", message)
         again = _map(posterior, result, method, seed)
-        again.timing = {
-            k: again.timing.get(k, 0.0) + result.timing.get(k, 0.0) for k in {*again.timing, *result.timing}
-        }
+        again.timing = _summed([again, result])
         if "ambiguous" in result.diagnostics:
             again.diagnostics["ambiguous"] = result.diagnostics["ambiguous"]
         result = again
@@ -147,12 +177,94 @@ def map_stage(posterior: Posterior, start: FitResult, method: str, seed: int) ->
     return result
 
 
+def stretch_lengths(n: int) -> list[int]:
+    """The samples of each stretch of a long record's MAP: LONG_RECORD // STRETCH_GROWTH, then
+    STRETCH_GROWTH times longer each, the whole record last (at most 1.25 STRETCH_GROWTH times the
+    one before it, so that no stretch is nearly the whole record)."""
+    lengths = [LONG_RECORD // STRETCH_GROWTH]
+    while n > 1.25 * STRETCH_GROWTH * lengths[-1]:
+        lengths.append(lengths[-1] * STRETCH_GROWTH)
+    return [*lengths, n]
+
+
+def stretched_map(posterior: Posterior, start: FitResult, method: str, seed: int) -> FitResult:
+    """The MAP of a long record: the MAP from every start and every reading of the spectrum on its
+    first stretch (`stretch_lengths`); then each reading within AMBIGUITY_MARGIN of the best there
+    is polished on ever longer stretches (`scipy_map.polish`, whitened by the Laplace covariance of
+    the stretch before, scaled by the ratio of lengths) up to the whole record, where the readings
+    are compared again and the Laplace approximation is formed.
+
+    A stretch 4x longer narrows the posterior 2x (a line's frequency 8x), so each start lies within
+    about one sd of the next optimum, where the likelihood is close to quadratic and a gradient
+    method needs a few dozen calls; the Nelder-Mead searches of the first stage cost calls on
+    LONG_RECORD / 4 samples, not on the whole record (a one-hour 200 Hz record: 18 ms a call).
+    Unsupported when the model cannot be cut (`SignalModel.head`)."""
+    t0 = time.perf_counter()
+    series, space = posterior.series, posterior.space
+    lengths = stretch_lengths(series.time.size)
+    free = dict(zip(space.names, space.priors))
+    first = Posterior(posterior.model.head(lengths[0]), free)
+    logger.info(
+        "a long record (%d samples): the MAP starts on its first %d samples, then %s",
+        series.time.size,
+        lengths[0],
+        ", ".join(str(n) for n in lengths[1:]),
+    )
+    found = _map(first, base_result(first, "start", start.point, starts=start.starts), method, seed)
+    runs = _readings(first, found, method, seed)
+    top = max(_finite(r.log_post) for _, r in runs)
+    kept = [
+        (what, MapPoint(r.z, r.cov_z, _finite(r.log_post)))
+        for what, r in runs
+        if top - _finite(r.log_post) < AMBIGUITY_MARGIN
+    ]
+    for before, length in itertools.pairwise(lengths):
+        stage = posterior if length == series.time.size else Posterior(posterior.model.head(length), free)
+        kept = [(what, polish(stage, p.z, p.cov_z * (before / length))) for what, p in kept]
+    winner, ambiguous = _decide(posterior, [(what, posterior.values(p.z), p.log_post) for what, p in kept])
+    facts, message = posterior.model.refine(posterior.values(kept[winner][1].z))
+    if message:
+        logger.info("%s", message)
+        kept = [(what, polish(posterior, p.z, p.cov_z)) for what, p in kept]
+        winner, ambiguous = _decide(posterior, [(what, posterior.values(p.z), p.log_post) for what, p in kept])
+    searched = _summed([r for _, r in runs])
+    result = map_result(posterior, found.method, kept[winner][1], seed)
+    result.timing = {**searched, "polish_s": time.perf_counter() - t0 - sum(searched.values())}
+    result.diagnostics["ambiguous"] = ambiguous
+    result.diagnostics["map_stretches"] = lengths
+    result = complete(result, posterior)
+    if facts:
+        result.data["model"] = {**result.data.get("model", {}), **posterior.model.describe(), **facts}
+    return result
+
+
+def _summed(results: list[FitResult]) -> dict[str, float]:
+    """Every stage's seconds over several results."""
+    keys = dict.fromkeys(k for r in results for k in r.timing)
+    return {k: sum(r.timing.get(k, 0.0) for r in results) for k in keys}
+
+
 def _alternatives(posterior: Posterior, best: FitResult, method: str, seed: int) -> FitResult:
-    """The MAP from each other reading of the spectrum the model knows (`SignalModel.alternatives`);
-    the best posterior wins, and a reading that is not AMBIGUITY_MARGIN below it is reported in
-    `diagnostics["ambiguous"]` instead of being dropped in silence."""
+    """The best of the MAPs from every reading of the spectrum (`_readings`); a reading that is not
+    AMBIGUITY_MARGIN below it is reported in `diagnostics["ambiguous"]` instead of being dropped
+    in silence."""
+    every = _readings(posterior, best, method, seed)
+    if len(every) == 1:
+        return best
+    winner_at, ambiguous = _decide(posterior, [(what, r.point, r.log_post) for what, r in every])
+    if winner_at:
+        logger.info("the MAP moved to another reading of the spectrum: %s", every[winner_at][0])
+    winner = every[winner_at][1]
+    winner.timing = _summed([r for _, r in every])
+    winner.diagnostics["ambiguous"] = ambiguous
+    return winner
+
+
+def _readings(posterior: Posterior, best: FitResult, method: str, seed: int) -> list[tuple[str, FitResult]]:
+    """`best` (the MAP found first) and the MAP from each other reading of the spectrum the model
+    knows (`SignalModel.alternatives`), each with what it changes."""
     space = posterior.space
-    runs = []
+    runs = [("the reading the MAP found first", best)]
     for what, values in posterior.model.alternatives(best.point, space.names):
         start = {n: p.inside(values.get(n, best.point[n])) for n, p in zip(space.names, space.priors)}
         # a casadi run whose optimum is predicted more than the ambiguity margin below the best is
@@ -160,30 +272,23 @@ def _alternatives(posterior: Posterior, best: FitResult, method: str, seed: int)
         floor = _finite(best.log_post) - AMBIGUITY_MARGIN
         first = base_result(posterior, "start", start, starts=[start])
         runs.append((what, _map(posterior, first, method, seed, floor=floor if math.isfinite(floor) else None)))
-    if not runs:
-        return best
-    every = [best, *(r for _, r in runs)]
-    timing = {k: sum(r.timing.get(k, 0.0) for r in every) for k in dict.fromkeys(k for r in every for k in r.timing)}
-    chosen = max([("the first reading", best), *runs], key=lambda wr: _finite(wr[1].log_post))
-    winner = chosen[1]
+    return runs
+
+
+def _decide(posterior: Posterior, readings: list[tuple[str, dict[str, float], float | None]]) -> tuple[int, list]:
+    """(index of the best of (what, values, log posterior) readings, the others that are another
+    reading than it and less than AMBIGUITY_MARGIN below it: what, gap, frequencies)."""
+    best = max(range(len(readings)), key=lambda i: _finite(readings[i][2]))
+    _, top, top_lp = readings[best]
     ambiguous = []
-    for what, other in [("the first reading", best), *runs]:
-        if other is winner or _same(other.point, winner.point):
+    for i, (what, values, lp) in enumerate(readings):
+        if i == best or _same(values, top):
             continue
-        gap = _finite(winner.log_post) - _finite(other.log_post)
+        gap = _finite(top_lp) - _finite(lp)
         if gap < AMBIGUITY_MARGIN:
-            ambiguous.append(
-                {
-                    "alternative": what if other is not best else "the reading the MAP found first",
-                    "delta_log_posterior": float(gap),
-                    "values": {n: other.point[n] for n in space.names if n.split("[")[0].endswith("frequency")},
-                }
-            )
-    if chosen[0] != "the first reading":
-        logger.info("the MAP moved to another reading of the spectrum: %s", chosen[0])
-    winner.timing = timing
-    winner.diagnostics["ambiguous"] = ambiguous
-    return winner
+            freqs = {n: values[n] for n in posterior.space.names if n.split("[")[0].endswith("frequency")}
+            ambiguous.append({"alternative": what, "delta_log_posterior": float(gap), "values": freqs})
+    return best, ambiguous
 
 
 def _same(a: dict[str, float], b: dict[str, float]) -> bool:

@@ -17,6 +17,10 @@ from vibinverse.io import jsonio
 from vibinverse.io.series import Series, check_file, netcdf_format
 from vibinverse.priors import Prior
 
+#: approximations whose draws are of the posterior itself (resampled by importance weights), so that
+#: the summary's intervals are their quantiles (`vibinverse.estimators.importance`)
+WEIGHTED_APPROXIMATIONS = ("importance",)
+
 
 @dataclass(frozen=True)
 class Detection:
@@ -81,11 +85,14 @@ class FitResult:
         long name, and with posterior draws the rank-normalized split R-hat and the bulk and tail
         ESS (`convergence`); `approximation` says what the intervals are without draws.
 
-        With posterior draws the numbers are their quantiles; without them (spectral, SINDy, MAP)
+        With posterior draws (or the resampled draws of an importance-sampled approximation,
+        WEIGHTED_APPROXIMATIONS) the numbers are their quantiles; without them (spectral, SINDy, MAP)
         the interval is the Laplace approximation's, formed in the unconstrained space
         (`_approximate_interval`), or null without an sd.
         """
         draws = self.draws
+        if draws is None and self.approximation in WEIGHTED_APPROXIMATIONS:
+            draws = self.approximate_draws  # draws of the posterior, resampled by importance weights
         convergence = self.convergence()
         params = {}
         for j, n in enumerate(self.names):

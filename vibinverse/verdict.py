@@ -33,6 +33,7 @@ APPROXIMATIONS = {
     "laplace": "Laplace approximation",
     "jackknife": "jackknife approximation",
     "spectral": "spectral approximation",
+    "importance": "Laplace approximation corrected by importance sampling (PSIS)",
 }
 
 #: how a line test's label reads
@@ -259,6 +260,12 @@ def trust(summary: dict, lines: list[VerdictLine] | None = None) -> tuple[bool |
                     "Hessian not positive definite",
                 )
             )
+        elif "psis_khat" in d:
+            checked = (
+                f"Pareto k {format_number(d['psis_khat'], '.2f')}, "
+                f"{format_number(d.get('importance_ess'), '.0f')} effective draws"
+            )
+            passed.append((f"intervals from a {label} ({checked})", label))
         else:
             passed.append((f"intervals from a {label} (no sampler, so no R-hat)", label))
     checks = d.get("residual_checks")

@@ -12,6 +12,8 @@ from scipy.stats import multivariate_normal
 from vibinverse.kalman import (
     discretize_continuous,
     filter_steps,
+    held_oscillator_fill,
+    held_stationary,
     hold_samples,
     log_likelihood,
     log_likelihood_reference,
@@ -132,6 +134,55 @@ def test_oscillator_tables_equal_the_van_loan_matrix_exponential(zeta):
         ref_phi, ref_q = discretize_continuous(a, np.array([0.0, 1.0]), 2.5, dt)
         e_phi, e_q = _scaled_errors(phis[k], qs[k], ref_phi, ref_q, W3)
         assert e_phi < 1e-12 and e_q < 1e-12, (zeta, wdt[k], e_phi, e_q)
+
+
+def _held_reference(w, zeta, frame, step):
+    """(Phi, Q) of a force held over each of round(step / frame) equal parts of the step at variance
+    1 / part: the augmented matrix exponential exp([[A, B], [0, 0]] h) gives (Phi, Gamma) of a part,
+    the parts are composed one by one."""
+    from scipy.linalg import expm
+
+    parts = max(1, round(step / frame))
+    h = step / parts
+    aug = np.zeros((3, 3))
+    aug[:2, :2] = [[0.0, 1.0], [-w * w, -2 * zeta * w]]
+    aug[1, 2] = 1.0
+    e = expm(aug * h)
+    phi, q = e[:2, :2], np.outer(e[:2, 2], e[:2, 2]) / h
+    out_phi, out_q = np.eye(2), np.zeros((2, 2))
+    for _ in range(parts):
+        out_phi, out_q = phi @ out_phi, phi @ out_q @ phi.T + q
+    return out_phi, out_q
+
+
+@pytest.mark.parametrize("zeta", [0.0, 1e-4, 0.0138, 0.3, 0.999, 1.0, 1.5])
+@pytest.mark.parametrize("hz", [0.02, 3.46, 99.0])
+def test_held_force_tables_equal_the_augmented_matrix_exponential(zeta, hz):
+    """The held force's (Phi, Q) (`held_oscillator_fill`, the frame model's base noise) against the
+    augmented exponential composed frame by frame, for one frame, two and seven (dropped frames),
+    a jittered 1.2 frames and 1000 frames (squaring), from 0.02 Hz (w dt 6e-4, the integral's
+    series) to 99 Hz at 200 frames a second (near Nyquist), undamped to over-damped: 1e-9 in the
+    scaled norm of `_scaled_errors`; the stationary covariance against scipy's Lyapunov solver."""
+    from scipy.linalg import solve_discrete_lyapunov
+
+    w, frame = 2 * np.pi * hz, 0.005
+    steps = np.array([frame, 2 * frame, 7 * frame, 1.2 * frame, 1000 * frame])
+    phis, qs = np.zeros((steps.size, 2, 2)), np.zeros((steps.size, 2, 2))
+    held_oscillator_fill(w, zeta * w, 2.5, steps, frame, phis, qs, 0)
+    for k, step in enumerate(steps):
+        ref_phi, ref_q = _held_reference(w, zeta, frame, step)
+        if (zeta - np.sqrt(max(zeta * zeta - 1, 0.0))) * w * step > 30:  # Phi decayed to e^-30 (slowest rate)
+            assert np.abs(phis[k]).max() < 1e-9 * max(1.0, w)
+            continue
+        e_phi, e_q = _scaled_errors(phis[k], qs[k], ref_phi, 2.5 * ref_q, w)
+        assert e_phi < 1e-9 and e_q < 1e-9, (zeta, hz, step, e_phi, e_q)
+    stationary = held_stationary(phis[0], qs[0])
+    if zeta > 0:
+        ref = solve_discrete_lyapunov(phis[0], qs[0])
+        d = np.diag([1.0, 1.0 / w])
+        assert np.abs(d @ (stationary - ref) @ d).max() <= 1e-8 * np.abs(d @ ref @ d).max()
+    else:
+        assert np.all(np.isinf(stationary))
 
 
 def test_oscillator_tables_equal_a_150_digit_van_loan_exponential():

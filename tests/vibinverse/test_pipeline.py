@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tests.conftest import frame, series
+from tests.conftest import LOW_RES, SNR10, K, frame, frame_problem, series, simulate
 from vibinverse.io.series import Series
 from vibinverse.models import build_model
 from vibinverse.pipeline import run
@@ -27,9 +27,6 @@ def test_auto_chains_spectral_sindy_casadi_emcee_and_times_each(tmp_path):
     s = Series(s.time[keep], s.intensity[keep], "dropped frames", scene=table)
     summary = run(Posterior(build_model(table, s)), "sindy", progress=False).summary()
     assert summary["diagnostics"]["sindy"]["status"] == "declined" and summary["method"] == "spectral"
-
-
-K = "surfaces.roof.motion."
 
 
 @pytest.mark.slow
@@ -144,3 +141,79 @@ def test_a_fit_beyond_the_memory_limit_is_refused_and_casadi_steps_aside(monkeyp
     monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", str(1e6))
     with pytest.raises(InputError, match=r"a fit of 1000 samples needs about 3 MB, above the memory limit 1 MB"):
         vi.fit(s, scene, method="spectral")
+
+
+def test_stretch_lengths_grow_to_the_whole_record():
+    from vibinverse.pipeline import LONG_RECORD, STRETCH_GROWTH, stretch_lengths
+
+    first = LONG_RECORD // STRETCH_GROWTH
+    assert stretch_lengths(720_000) == [first, first * 4, first * 16, 720_000]
+    assert stretch_lengths(LONG_RECORD + 1) == [first, LONG_RECORD + 1]
+    for n in (LONG_RECORD + 1, 3 * LONG_RECORD, 10**7):
+        lengths = stretch_lengths(n)
+        ratios = np.diff(lengths) / np.array(lengths[:-1])
+        assert lengths[-1] == n and np.all(ratios > 0) and np.all(ratios <= 1.25 * STRETCH_GROWTH - 1)
+        assert np.all(ratios[:-1] == STRETCH_GROWTH - 1)
+
+
+@pytest.mark.slow
+def test_a_long_record_s_map_over_stretches_equals_the_whole_record_map(monkeypatch, caplog):
+    """A 120 s frame record (24 000 samples) with the long-record threshold lowered to 8000: the MAP
+    found on 2000 samples and polished on 8000 and 24 000 (`stretched_map`) is the MAP of the whole
+    record: every value within 0.05 of its sd, every sd within 2 % (the Laplace covariance of the
+    same optimum)."""
+    import logging
+
+    import vibinverse.pipeline as pipeline
+
+    prob = frame_problem(SNR10, "sampling.duration=120")
+    whole = run(prob, "map")
+    monkeypatch.setattr(pipeline, "LONG_RECORD", 8000)
+    with caplog.at_level(logging.INFO, logger="vibinverse"):
+        stretched = run(prob, "map")
+    assert "the MAP starts on its first 2000 samples, then 8000, 24000" in caplog.text
+    assert stretched.diagnostics["map_stretches"] == [2000, 8000, 24000]
+    assert stretched.log_post == pytest.approx(whole.log_post, abs=0.05)
+    for n in prob.space.names:
+        assert abs(stretched.point[n] - whole.point[n]) <= 0.05 * whole.sd[n], n
+        assert stretched.sd[n] == pytest.approx(whole.sd[n], rel=0.02), n
+
+
+def test_a_model_that_cannot_be_cut_fits_its_long_record_whole(monkeypatch, caplog):
+    """The deterministic model has no `head`: above the threshold its MAP runs on the whole record,
+    and says so."""
+    import logging
+
+    import vibinverse.pipeline as pipeline
+
+    table, data = simulate("ground_rayleigh", LOW_RES, "noise.sigma=3e-6", "sampling.duration=0.5", seed=2)
+    monkeypatch.setattr(pipeline, "LONG_RECORD", data.time.size // 2)
+    prob = Posterior(build_model(table, data))
+    with caplog.at_level(logging.INFO, logger="vibinverse"):
+        result = run(prob, "map")
+    assert "the MAP runs on the whole record: the deterministic model is not fitted on a stretch" in caplog.text
+    assert "map_stretches" not in result.diagnostics and np.isfinite(result.log_post)
+
+
+@pytest.mark.slow
+def test_a_long_record_s_default_fit_importance_samples_its_laplace_approximation(monkeypatch):
+    """With the long-record threshold lowered to 8000, the default fit of a 120 s frame record finds
+    its MAP over stretches and its posterior by importance sampling (no emcee): the check passes,
+    every value lies within 3.3 sd of the truth, and the verdict says what the intervals are."""
+    import vibinverse.pipeline as pipeline
+    from vibinverse.verdict import trust
+
+    prob = frame_problem(SNR10, "sampling.duration=120")
+    monkeypatch.setattr(pipeline, "LONG_RECORD", 8000)
+    result = run(prob, "auto", progress=False)
+    summary = result.summary()
+    assert summary["approximation"] == "importance" and "mcmc_s" not in summary["timing"]
+    assert {"spectral_s", "importance_s", "polish_s"} <= set(summary["timing"])
+    d = summary["diagnostics"]
+    assert d["psis_khat"] < 0.7 and d["importance_ess"] >= 400
+    for n, p in summary["parameters"].items():  # 3.3 sd: 1 in 1000 per parameter
+        if p["truth"] is not None:
+            assert abs(p["median"] - p["truth"]) <= 3.3 * p["sd"], (n, p)
+        assert p["q05"] < p["map"] < p["q95"], (n, p)
+    _, reasons, _ = trust(summary)
+    assert any("Laplace approximation corrected by importance sampling (PSIS) (Pareto k" in r for r in reasons)

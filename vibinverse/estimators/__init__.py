@@ -1,8 +1,10 @@
 """Estimators behind one interface (`Estimator.fit(posterior, start) -> FitResult`), by role:
-spectral starts, SINDy identification, casadi MAP + Laplace, derivative-free MAP, emcee."""
+spectral starts, SINDy identification, casadi MAP + Laplace, derivative-free MAP, emcee, and the
+Laplace approximation importance-sampled (long records)."""
 
 from vibinverse.estimators.base import ESTIMATORS, Estimator, register_estimator
 from vibinverse.estimators.casadi_map import CasadiMap
+from vibinverse.estimators.importance import LaplaceImportance
 from vibinverse.estimators.mcmc import Emcee
 from vibinverse.estimators.scipy_map import ScipyMap
 from vibinverse.estimators.sindy import SindyEstimator
@@ -13,6 +15,7 @@ __all__ = [
     "CasadiMap",
     "Emcee",
     "Estimator",
+    "LaplaceImportance",
     "ScipyMap",
     "SindyEstimator",
     "SpectralEstimator",

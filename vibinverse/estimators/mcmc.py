@@ -348,10 +348,13 @@ class LaplaceMove(emcee.moves.MHMove):
         u = np.linalg.solve(self.chol, (x - self.mean).T)
         return -0.5 * (self.DF + self.mean.size) * np.log1p(np.sum(u * u, axis=0) / self.DF)
 
-    def _propose(self, coords: np.ndarray, random) -> tuple[np.ndarray, np.ndarray]:
-        n, d = coords.shape
+    def draw(self, n: int, random) -> np.ndarray:
+        """n draws (n, d) of the proposal (`random`: a numpy Generator or RandomState)."""
         w = np.sqrt(self.DF / random.chisquare(self.DF, size=n))
-        new = self.mean + (random.standard_normal((n, d)) @ self.chol.T) * w[:, None]
+        return self.mean + (random.standard_normal((n, self.mean.size)) @ self.chol.T) * w[:, None]
+
+    def _propose(self, coords: np.ndarray, random) -> tuple[np.ndarray, np.ndarray]:
+        new = self.draw(coords.shape[0], random)
         return new, self.log_density(coords) - self.log_density(new)
 
 

@@ -90,7 +90,12 @@ def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed
         res = minimize(neg, res.x, method="BFGS", options={"gtol": 1e-6})
         if best is None or res.fun < best.fun:
             best = res
-    z = best.x
+    return laplace_point(neg, best.x, float(-best.fun))
+
+
+def laplace_point(neg: Callable[[np.ndarray], float], z: np.ndarray, log_post: float) -> MapPoint:
+    """The MapPoint at the optimum z of -log posterior `neg`: Laplace covariance from its
+    central-difference Hessian (`laplace_steps`)."""
     h = hessian(neg, z, laplace_steps(neg, z))
     ok = True
     try:
@@ -101,7 +106,43 @@ def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed
     except np.linalg.LinAlgError:  # conditional sds only: they understate correlated parameters
         ok = False
         cov = np.diag(1.0 / np.maximum(np.abs(np.diag(h)), 1e-12))
-    return MapPoint(z, cov, float(-best.fun), ok)
+    return MapPoint(z, cov, log_post, ok)
+
+
+#: the polish's finite-difference step and gradient tolerance, in units of the start's sd: the
+#: gradient's truncation error is O(step^2), its rounding error (the log-likelihood of a long
+#: record carries ~1e-6 of summation noise) ~1e-6 / step; at the tolerance the optimum is within
+#: ~1e-2 sd of where BFGS stops
+POLISH_STEP, POLISH_GTOL = 1e-3, 1e-2
+
+
+def polish(problem: Posterior, z0: np.ndarray, cov0: np.ndarray) -> MapPoint:
+    """The MAP near z0 by BFGS in coordinates whitened by `cov0` (the Laplace covariance of a
+    close posterior: the same model on a shorter stretch of the record, scaled to this one's
+    length), with central-difference gradients; then the Laplace covariance (`laplace_point`).
+    Where the data add little (a tenfold longer stretch), a few iterations of 2 d + ~3 calls each
+    reach the optimum, against the thousands of a Nelder-Mead search."""
+    chol = np.linalg.cholesky(0.5 * (cov0 + cov0.T) + 1e-12 * np.eye(z0.size) * max(np.trace(cov0), 1e-300))
+
+    def neg(z: np.ndarray) -> float:
+        lp = problem.log_posterior(z) if np.all(np.isfinite(z)) else -math.inf
+        return -lp if math.isfinite(lp) else math.inf
+
+    def neg_u(u: np.ndarray) -> float:
+        return neg(z0 + chol @ u)
+
+    def grad_u(u: np.ndarray) -> np.ndarray:
+        g = np.empty(u.size)
+        for i in range(u.size):
+            e = np.zeros(u.size)
+            e[i] = POLISH_STEP
+            g[i] = (neg_u(u + e) - neg_u(u - e)) / (2 * POLISH_STEP)
+        return np.where(np.isfinite(g), g, 0.0)
+
+    res = minimize(neg_u, np.zeros(z0.size), jac=grad_u, method="BFGS", options={"gtol": POLISH_GTOL})
+    u = res.x if res.fun <= neg_u(np.zeros(z0.size)) else np.zeros(z0.size)
+    z = z0 + chol @ u
+    return laplace_point(neg, z, -neg(z))
 
 
 def laplace_draws(problem: Posterior, z: np.ndarray, cov_z: np.ndarray, seed: int, n: int = 2000) -> np.ndarray:

@@ -11,7 +11,7 @@ import csv as csvlib
 import math
 import re
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -86,6 +86,12 @@ class Series:
         """The intensity's units when the file gave them (a netCDF `units` attribute), else None."""
         units = _noted(self.notes, UNITS_NOTE)
         return None if units is None else units.split(" (")[0]
+
+    def head(self, n: int) -> Series:
+        """The first n samples (a leading stretch of the record), with the same source, scene and notes."""
+        if not 2 <= n <= self.time.size:
+            raise InputError(f"head: n must be in [2, {self.time.size}], got {n}")
+        return replace(self, time=self.time[:n], intensity=self.intensity[:n])
 
     def describe(self) -> str:
         kind = f"uniform at {self.fs:g} Hz" if self.uniform else irregular_sampling(self.time)

@@ -118,6 +118,12 @@ class SignalModel(ABC):
         a reading it cannot rule out (`vibinverse.pipeline.map_stage`)."""
         return []
 
+    def head(self, n: int) -> SignalModel:
+        """The same model on the first n samples of its series: its log-likelihood there is the sum
+        of this model's first n pointwise log densities (a long record's MAP starts on a leading
+        stretch: `vibinverse.pipeline`). Unsupported when the model cannot be cut so."""
+        raise Unsupported(f"the {self.name} model is not fitted on a stretch of its record")
+
     def phase_period(self, name: str) -> float:
         """The period of a phase parameter as the data see it."""
         return 2 * math.pi

@@ -9,13 +9,16 @@ likelihood of the residual is a Kalman filter on the two tilt modes (4 states, O
 observation is linearized in the random part (its quadratic term is ~g/m ~ 1e-4 of the linear one
 at the paper's tilts). Gaps (NaN samples) are skipped by the filter.
 
-Any time stamps. The base noise is continuous white noise whose intensity is noise_rms^2 times the
-series' median step (the spectrum of a white motion of RMS noise_rms held over each sample, as
-`forward` simulates it, below the sample rate; the two tilt variances differ by O((w dt)^2), 1e-3 at
-the paper's 3.46 Hz and 200 Hz). Each tilt mode is discretized exactly over each time step
-(`vibinverse.kalman.oscillator_tables`, closed form): a uniform grid has one step and the fast
-filter; irregular stamps (jitter, dropped frames) a table of (Phi, Q) per distinct step, rounded to
-1e-9 of the median step, and the per-step filter. The drive mean is evaluated at the stamps.
+Any time stamps. The base noise is a white motion of RMS noise_rms held over each frame of the
+series' median step, exactly as `forward` simulates it (`kalman.held_oscillator_fill`; a step of
+several frames, dropped frames, holds one value per frame). Continuous white noise of the same
+intensity has the same resonance but not the same high-frequency part: the one-step prediction
+error of a 3.46 Hz tilt at 200 Hz is then 1.5x larger in variance, and on a one-hour record that
+pulled the damping ratio to 0.58x and noise_rms to 0.8x their true values, far outside the
+intervals. Each tilt mode is discretized exactly over each time step (closed form): a uniform grid
+has one step and the fast filter; irregular stamps (jitter, dropped frames) a table of (Phi, Q) per
+distinct step, rounded to 1e-9 of the median step, and the per-step filter. The drive mean is
+evaluated at the stamps.
 """
 
 from __future__ import annotations
@@ -36,10 +39,11 @@ from vibinverse.fisher import frame_fisher
 from vibinverse.io.scenes import scene_of
 from vibinverse.io.series import MIN_CYCLES, Series, with_sampling
 from vibinverse.kalman import (
+    held_oscillator_fill,
+    held_stationary,
     log_likelihood,
     log_likelihood_steps,
     njit,
-    oscillator_fill,
     pointwise_log_likelihood,
     simulate,
     unique_steps,
@@ -238,11 +242,11 @@ class FrameModel(SignalModel):
                 phis[:, 2 * b :, 2 * b :] = phis[:, :2, :2]
                 qs[:, 2 * b :, 2 * b :] = qs[:, :2, :2] * (kappa / filled[2])
             else:
-                oscillator_fill(w_i, a_i, kappa, self._steps, phis, qs, 2 * b)
+                held_oscillator_fill(w_i, a_i, kappa, self._steps, self.dt, phis, qs, 2 * b)
             filled = (w_i, a_i, kappa)
-            if kappa:  # the stationary covariance (infinite undamped: no stationary state)
-                p0[2 * b, 2 * b] = kappa / (4.0 * a_i * w_i * w_i) if a_i > 0 else math.inf
-                p0[2 * b + 1, 2 * b + 1] = kappa / (4.0 * a_i) if a_i > 0 else math.inf
+            if kappa:  # the stationary covariance at the frame step (infinite undamped: no stationary state)
+                block = slice(2 * b, 2 * b + 2)
+                p0[block, block] = held_stationary(phis[-1, block, block], qs[-1, block, block])
             h[2 * b] = gains[i]
         sigma = values.get("noise.sigma", self.base_value("noise.sigma") if "noise" in self.base else 0.0)
         phi, q = phis[-1], qs[-1]
@@ -374,6 +378,11 @@ class FrameModel(SignalModel):
         if c.idx is not None:
             return log_likelihood_steps(self.series.intensity - c.mean, c.phis, c.qs, c.idx, c.h, c.r, c.p0)
         return log_likelihood(self.series.intensity - c.mean, c.phi, c.q, c.h, c.r, c.p0)
+
+    def head(self, n: int) -> FrameModel:
+        """The frame model of the first n samples (the same scene and filter: per-step on a stretch
+        of irregular stamps that happens to be uniform)."""
+        return FrameModel(self.base, self.series.head(n), per_step=self.per_step)
 
     def pointwise_log_likelihood(self, values: dict[str, float]) -> np.ndarray:
         """Each sample's one-step predictive log density log p(y_k | y_1..y_{k-1}) (the Kalman

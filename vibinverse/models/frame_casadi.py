@@ -7,7 +7,8 @@ checks that they agree to 1e-9), written in casadi expressions:
   `forward.motion.frame.linearize` with unit springs: every one of them is linear in k1 and b1;
 - the modal -> physical map k1 = M w^2 / 12, b1 = M zeta w / 6 of `FrameParameters.from_modal`;
 - the drive's steady state H(i w) at the stamps, and the closed-form discretization of a damped
-  oscillator under continuous white noise (`vibinverse.kalman.oscillator_tables`, underdamped);
+  oscillator under a force held over each frame (`vibinverse.kalman.held_oscillator_fill`,
+  underdamped) with its stationary start;
 - the Kalman recursion as one casadi step Function unrolled over the series by `mapaccum`, on the
   two states of the one oscillator the pixel sees (both tilt modes are the same oscillator, so what
   the pixel sees of them is that oscillator under the summed noise intensities: `_tilt_blocks`).
@@ -32,22 +33,43 @@ if TYPE_CHECKING:
     from vibinverse.posterior import Posterior
 
 
-def _oscillator_step() -> ca.Function:
-    """(w, a, dt) -> (Phi, Q) of x = (q, q'), q'' + 2 a q' + w^2 q = xi, xi white of unit intensity,
-    over dt, each as a 4-vector in column order: the closed form of `vibinverse.kalman.oscillator_fill`
-    (underdamped; Q11's closed form without the small-step series, which it needs only below w dt
-    ~ 1e-3 to stay within 1e-10)."""
-    w, a, dt = ca.SX.sym("w"), ca.SX.sym("a"), ca.SX.sym("dt")
+def _held_step(parts: int) -> ca.Function:
+    """(w, a, step) -> (Phi, Q) of x = (q, q'), q'' + 2 a q' + w^2 q = u, u held over each of
+    `parts` equal parts h of the step at an independent value of variance 1 / h (unit intensity),
+    each as a 4-vector in column order: the closed form of `vibinverse.kalman.held_oscillator_fill`
+    (underdamped; the integral of the impulse response as (1 - Phi_11) / w^2, without the small-step
+    series, which it needs only below w h ~ 1e-3 to stay within 1e-10), composed over the parts by
+    squaring."""
+    w, a, step = ca.SX.sym("w"), ca.SX.sym("a"), ca.SX.sym("step")
+    h = step / parts
     b = ca.sqrt(w * w - a * a)
-    ea = ca.exp(-a * dt)
-    us, uc = ea * ca.sin(b * dt) / b, ea * ca.cos(b * dt)
-    em = -ca.expm1(-2 * a * dt) / a  # (1 - e^{-2 a dt}) / a
-    phi = ca.vertcat(uc + a * us, -w * w * us, us, uc - a * us)
-    q12 = 0.5 * us * us
-    q = ca.vertcat(
-        (em - 2 * us * uc - 2 * a * us * us) / (4 * w * w), q12, q12, 0.25 * (em + 2 * us * uc - 2 * a * us * us)
+    ea = ca.exp(-a * h)
+    us, uc = ea * ca.sin(b * h) / b, ea * ca.cos(b * h)
+    f = ca.SX(2, 2)
+    f[0, 0], f[0, 1], f[1, 0], f[1, 1] = uc + a * us, us, -w * w * us, uc - a * us
+    g = ca.vertcat((1 - f[0, 0]) / (w * w), us)
+    q = g @ g.T / h
+    r, s = ca.SX.eye(2), ca.SX.zeros(2, 2)
+    m = parts
+    while m:  # (Pa, Qa) then (Pb, Qb) is (Pb Pa, Pb Qa Pb^T + Qb)
+        if m & 1:
+            r, s = f @ r, f @ s @ f.T + q
+        m >>= 1
+        if m:
+            f, q = f @ f, f @ q @ f.T + q
+    return ca.Function("held_step", [w, a, step], [ca.vec(r), ca.vec(s)])
+
+
+def _stationary(phi, q):
+    """The stationary covariance's distinct entries (P11, P12, P22) of P = Phi P Phi^T + Q (4-vectors
+    in column order), as `vibinverse.kalman.held_stationary`."""
+    f11, f21, f12, f22 = phi[0], phi[1], phi[2], phi[3]
+    m = ca.vertcat(
+        ca.horzcat(f11 * f11, 2 * f11 * f12, f12 * f12),
+        ca.horzcat(f11 * f21, f11 * f22 + f12 * f21, f12 * f22),
+        ca.horzcat(f21 * f21, 2 * f21 * f22, f22 * f22),
     )
-    return ca.Function("oscillator_step", [w, a, dt], [phi, q])
+    return ca.solve(ca.DM.eye(3) - m, ca.vertcat(q[0], q[2], q[3]))
 
 
 class CasadiFrameObjective:
@@ -128,11 +150,11 @@ class CasadiFrameObjective:
             if "noise.sigma" in values
             else (get_value(self.like.base, "noise.sigma") if "noise" in self.like.base else 0.0)
         )  # as FrameLikelihood
-        phi2, q2, kappa, a = self._tilt_blocks(w, zeta, k1, rms)
+        phi2, q2, kappa, p0 = self._tilt_blocks(w, zeta, k1, rms)
         # the data enter as a parameter, so that one compiled solver serves many series of one design
         y = ca.MX.sym("y", self.like.t.size)
         mask = ca.MX.sym("mask", self.like.t.size)
-        ll = self._kalman(y - mean, mask, phi2, q2, kappa, sigma * sigma, a, w)
+        ll = self._kalman(y - mean, mask, phi2, q2, kappa, sigma * sigma, p0)
         return ca.Function("neg_log_post", [z, y, mask], [-(log_prior + ll)])
 
     def data(self, series=None) -> ca.DM:
@@ -148,7 +170,8 @@ class CasadiFrameObjective:
 
     def _tilt_blocks(self, w, zeta, k1, rms):
         """Per Kalman step (columns; one column on a uniform grid) the unit-intensity (Phi, Q) of the
-        tilt oscillator as 4-vectors, and the noise intensity of what the pixel sees of it.
+        tilt oscillator as 4-vectors, the noise intensity of what the pixel sees of it, and the
+        unit-intensity stationary covariance (P11, P12, P22) at the frame step.
 
         Both tilt modes are one oscillator (w^2 = 12 k1 / M and zeta whatever the roof's extents,
         `FrameParameters.from_modal`), driven by independent white noises of intensities kappa_b, and
@@ -160,25 +183,32 @@ class CasadiFrameObjective:
         derivatives, not the arithmetic of a step, takes most of it)."""
         like = self.like
         a = zeta * w
-        disc = _oscillator_step()
         if like.per_step:
-            # the Kalman step k updates with sample k, then predicts over t[k + 1] - t[k]
+            # the Kalman step k updates with sample k, then predicts over t[k + 1] - t[k]; the steps
+            # of m frames (dropped frames) by one mapped Function for each m
             steps = like.steps
+            parts = np.maximum(1, np.floor(steps / like.dt + 0.5)).astype(int)
+            blocks = [(np.flatnonzero(parts == m), int(m)) for m in np.unique(parts)]
+            mapped = [_held_step(m).map(at.size)(w, a, ca.DM(steps[at]).T) for at, m in blocks]
+            back = np.argsort(np.concatenate([at for at, _ in blocks])).tolist()  # the steps' own order
+            phi_u = ca.horzcat(*(phi for phi, _ in mapped))[:, back]
+            q_u = ca.horzcat(*(q for _, q in mapped))[:, back]
             cols = np.append(like.step_index[1:], steps.size - 1)
-            phi_u, q_u = disc.map(steps.size)(w, a, ca.DM(steps).T)
             phi2, q2 = phi_u[:, cols.tolist()], q_u[:, cols.tolist()]
+            p0 = _stationary(phi_u[:, -1], q_u[:, -1])  # the frame step is the table's last
         else:
-            phi2, q2 = disc(w, a, like.dt)
+            phi2, q2 = _held_step(1)(w, a, like.dt)
+            p0 = _stationary(phi2, q2)
         # the base force's white-noise intensity: noise_rms^2 x the nominal step (`FrameModel`)
         spring = sum(
             h * h * float(self.unit.force_spring[i] @ self.unit.force_spring[i]) / self.unit.mass[i] ** 2
             for h, i in zip(self.h[::2], self.seen)
         )
-        return phi2, q2, rms * rms * like.dt * k1 * k1 * spring, a
+        return phi2, q2, rms * rms * like.dt * k1 * k1 * spring, p0
 
-    def _kalman(self, resid, mask, phi2, q2, kappa, r, a, w):
+    def _kalman(self, resid, mask, phi2, q2, kappa, r, p0):
         """The Kalman log-likelihood of the seen oscillator (state (q, q'), observed q + noise of
-        variance r, started in its stationary state P0 = kappa diag(1 / (4 a w^2), 1 / (4 a)));
+        variance r, started in its stationary state kappa p0 (P11, P12, P22 at unit intensity));
         step k takes column k of phi2 and q2 (or their one column). P is carried as its three
         distinct entries."""
         x0, x1, pa, pb, pc = (ca.SX.sym(n) for n in ("x0", "x1", "pa", "pb", "pc"))
@@ -202,6 +232,6 @@ class CasadiFrameObjective:
         state = ca.vertcat(x0, x1, pa, pb, pc, acc)
         step = ca.Function("kf", [state, yk, mk, f, g, kap, rs], [ca.vertcat(n0, n1, na, nb, nc, acc + ll)])
         run = step.mapaccum("kf_all", resid.shape[0])
-        init = ca.vertcat(0, 0, kappa / (4 * a * w * w), 0, kappa / (4 * a), 0)
+        init = ca.vertcat(0, 0, kappa * p0, 0)
         out = run(init, resid.T, mask.T, phi2, q2, kappa, r)
         return out[-1, -1]

@@ -724,11 +724,12 @@ class ModalModel(SignalModel):
         self.gain_basis = gain_basis(self.t, s.gain) if s.gain else np.zeros((0, self.t.size))
         # the tables' arrays, reused between calls, one set per thread (`releases_gil`: threads
         # evaluate walkers at once); a dict by thread id stays picklable
-        self._buffers: dict[int, tuple[np.ndarray, ...]] = {}
+        self._buffers: dict[tuple[int, int], tuple[np.ndarray, ...]] = {}
 
     def _scratch(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(phis, qs, p0, pars, mean, multiplier) of the calling thread."""
-        key = threading.get_ident()
+        """(phis, qs, p0, pars, mean, multiplier) of the calling thread, for this model's samples (a
+        stretch of the record, `head`, shares the dict with a key of its own)."""
+        key = (threading.get_ident(), self.t.size)
         out = self._buffers.get(key)
         if out is None:
             phis = np.zeros((self.steps.size, self._nstate, self._nstate))
@@ -750,9 +751,13 @@ class ModalModel(SignalModel):
             return values[name]
         if name in self._fixed_values:
             return self._fixed_values[name]
+        return self._base()[name]
+
+    def _base(self) -> dict[str, float]:
+        """Every parameter's value when neither given nor fixed (computed once)."""
         if self._base_values is None:
             self._base_values = {**self._spectral_guesses()[0], **self._start, **self._fixed_values}
-        return self._base_values[name]
+        return self._base_values
 
     def tables(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray]:
         """(mean, phis, qs, r, P0) at `values` (the arrays are reused by the next call in this thread)."""
@@ -878,6 +883,18 @@ class ModalModel(SignalModel):
                 return -math.inf
         ll = self._run(values, np.empty(0), np.empty(0))
         return ll if math.isfinite(ll) else -math.inf
+
+    def head(self, n: int) -> ModalModel:
+        """The same model on the first n samples: what is fixed by the whole record stays (the 1/f
+        terms' time constants and the gain drift's cosines span the whole record, the values of
+        parameters that are not free come from its spectrum)."""
+        self._base()  # the record's own, before the cut
+        out = copy.copy(self)
+        out.series = self.series.head(n)
+        out.t, out.y, out.good, out.idx = self.t[:n], self.y[:n], self.good[:n], self.idx[:n]
+        out.n_obs = int(out.good.sum())
+        out.gain_basis = np.ascontiguousarray(self.gain_basis[:, :n])
+        return out
 
     def pointwise_log_likelihood(self, values: dict[str, float]) -> np.ndarray:
         """Each sample's one-step predictive log density (NaN at gaps); nansum = log_likelihood."""

@@ -207,11 +207,13 @@ def test_dropped_frames_equal_nan_gaps():
     assert model.log_likelihood(values) == pytest.approx(prob.model.log_likelihood(values), rel=1e-9)
 
 
-def test_irregular_stamps_equal_a_dense_grid_reference():
-    """20 % jitter and 10 % dropped frames against the uniform filter on a grid 20 times finer,
-    NaN everywhere but at the stamps (which lie on it exactly): the same continuous-time model,
-    to 1e-9. The base noise's intensity is noise_rms^2 x the median step, so the fine grid's
-    noise_rms is scaled to the same intensity."""
+def test_irregular_stamps_hold_the_base_force_over_each_frame():
+    """20 % jitter and 10 % dropped frames: every step's (Phi, Q) is that of the base force held over
+    each of its round(step / dt) frames, built independently from matrix exponentials of the
+    augmented system [[A, B], [0, 0]] and composed frame by frame, to 1e-9; the stationary start is
+    P = Phi P Phi^T + Q at the frame step."""
+    from scipy.linalg import expm, solve_discrete_lyapunov
+
     m = 20
     prob = frame_problem(SNR10, "sampling.duration=5")
     s = prob.series
@@ -219,15 +221,36 @@ def test_irregular_stamps_equal_a_dense_grid_reference():
     fine_t = np.arange(s.time.size * m) * (s.dt / m)
     idx = _jittered_frames(s.time.size, m, rng)
     y = s.intensity[np.minimum(np.rint(idx / m).astype(int), s.time.size - 1)]
-    irregular = validate(fine_t[idx], y, "irregular", s.scene)
-    fine_y = np.full(fine_t.size, np.nan)
-    fine_y[idx] = y
-    fine = validate(fine_t, fine_y, "fine", s.scene)
-    model, reference = build_model(prob.model.base, irregular), build_model(prob.model.base, fine)
-    assert model.per_step and not reference.per_step and model._steps.size > 8
-    for values in (prob.truth(), {**prob.truth(), K + "tilt_frequency": 3.0, K + "drive_phase": 1.0}):
-        scaled = {**values, K + "noise_rms": values[K + "noise_rms"] * np.sqrt(irregular.dt / fine.dt)}
-        assert model.log_likelihood(values) == pytest.approx(reference.log_likelihood(scaled), rel=1e-9)
+    model = build_model(prob.model.base, validate(fine_t[idx], y, "irregular", s.scene))
+    assert model.per_step and model._steps.size > 8
+    values = {**prob.truth(), K + "tilt_frequency": 3.0, K + "tilt_damping_ratio": 0.2}
+    c = model.components(values)
+    w, zeta = 2 * np.pi * 3.0, 0.2
+
+    def held(step):
+        parts = max(1, round(step / model.dt))
+        h = step / parts
+        aug = np.zeros((3, 3))
+        aug[:2, :2] = [[0.0, 1.0], [-w * w, -2 * zeta * w]]
+        aug[1, 2] = 1.0
+        e = expm(aug * h)
+        phi, q_frame = e[:2, :2], np.outer(e[:2, 2], e[:2, 2]) / h
+        out_phi, out_q = np.eye(2), np.zeros((2, 2))
+        for _ in range(parts):
+            out_phi, out_q = phi @ out_phi, phi @ out_q @ phi.T + q_frame
+        return out_phi, out_q
+
+    for b in range(c.phis.shape[1] // 2):
+        block = slice(2 * b, 2 * b + 2)
+        kappa = c.qs[-1][block, block][1, 1] / held(model.dt)[1][1, 1]  # one intensity for every step
+        for u, step in enumerate(model.steps):
+            ref_phi, ref_q = held(step)
+            np.testing.assert_allclose(c.phis[u][block, block], ref_phi, rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(c.qs[u][block, block], kappa * ref_q, rtol=1e-9, atol=1e-30)
+    for b in range(c.phis.shape[1] // 2):
+        block = slice(2 * b, 2 * b + 2)
+        ref = solve_discrete_lyapunov(c.phis[-1][block, block], c.qs[-1][block, block])
+        np.testing.assert_allclose(c.p0[block, block], ref, rtol=1e-8, atol=1e-30)
 
 
 def test_pointwise_log_likelihood_sums_to_the_log_likelihood():
