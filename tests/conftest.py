@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hypothesis import settings
+from scipy.linalg import expm
 
 from forward.scene_file import apply_overrides, load_scene, read_table, scene_from_table
 from forward.sensor import observe
@@ -48,6 +49,23 @@ def scene():
 
 
 # ------------------------------------------------------------------ the frame model (sec. 4.2)
+
+
+def held_reference(w, zeta, frame, step):
+    """(Phi, Q) of a force held over each of round(step / frame) equal parts of the step at variance
+    1 / part: the augmented matrix exponential exp([[A, B], [0, 0]] h) gives (Phi, Gamma) of a part,
+    the parts are composed one by one."""
+    parts = max(1, round(step / frame))
+    h = step / parts
+    aug = np.zeros((3, 3))
+    aug[:2, :2] = [[0.0, 1.0], [-w * w, -2 * zeta * w]]
+    aug[1, 2] = 1.0
+    e = expm(aug * h)
+    phi, q = e[:2, :2], np.outer(e[:2, 2], e[:2, 2]) / h
+    out_phi, out_q = np.eye(2), np.zeros((2, 2))
+    for _ in range(parts):
+        out_phi, out_q = phi @ out_phi, phi @ out_q @ phi.T + q
+    return out_phi, out_q
 
 
 def frame_problem(*overrides, seed=3, gaps=0.0):

@@ -36,7 +36,9 @@ METHODS = ("spectral", "sindy", "casadi", "map", "mcmc", "auto")
 AMBIGUITY_MARGIN = DETECTION_GAIN
 
 
-FIT_BYTES_PER_SAMPLE = 3e3  # the scipy MAP, predictive band and draws: 2.3 kB a sample measured (frame)
+#: the MAP, predictive band and draws: 2.3 kB a sample measured (the default fit of a one-hour 200 Hz
+#: frame record peaked at 1.68 GB), so that such a record fits the default 2 GiB limit
+FIT_BYTES_PER_SAMPLE = 2.5e3
 
 
 def check_fit(posterior: Posterior) -> None:

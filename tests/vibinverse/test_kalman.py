@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import multivariate_normal
 
+from tests.conftest import held_reference
 from vibinverse.kalman import (
     discretize_continuous,
     filter_steps,
@@ -136,25 +137,6 @@ def test_oscillator_tables_equal_the_van_loan_matrix_exponential(zeta):
         assert e_phi < 1e-12 and e_q < 1e-12, (zeta, wdt[k], e_phi, e_q)
 
 
-def _held_reference(w, zeta, frame, step):
-    """(Phi, Q) of a force held over each of round(step / frame) equal parts of the step at variance
-    1 / part: the augmented matrix exponential exp([[A, B], [0, 0]] h) gives (Phi, Gamma) of a part,
-    the parts are composed one by one."""
-    from scipy.linalg import expm
-
-    parts = max(1, round(step / frame))
-    h = step / parts
-    aug = np.zeros((3, 3))
-    aug[:2, :2] = [[0.0, 1.0], [-w * w, -2 * zeta * w]]
-    aug[1, 2] = 1.0
-    e = expm(aug * h)
-    phi, q = e[:2, :2], np.outer(e[:2, 2], e[:2, 2]) / h
-    out_phi, out_q = np.eye(2), np.zeros((2, 2))
-    for _ in range(parts):
-        out_phi, out_q = phi @ out_phi, phi @ out_q @ phi.T + q
-    return out_phi, out_q
-
-
 @pytest.mark.parametrize("zeta", [0.0, 1e-4, 0.0138, 0.3, 0.999, 1.0, 1.5])
 @pytest.mark.parametrize("hz", [0.02, 3.46, 99.0])
 def test_held_force_tables_equal_the_augmented_matrix_exponential(zeta, hz):
@@ -170,7 +152,7 @@ def test_held_force_tables_equal_the_augmented_matrix_exponential(zeta, hz):
     phis, qs = np.zeros((steps.size, 2, 2)), np.zeros((steps.size, 2, 2))
     held_oscillator_fill(w, zeta * w, 2.5, steps, frame, phis, qs, 0)
     for k, step in enumerate(steps):
-        ref_phi, ref_q = _held_reference(w, zeta, frame, step)
+        ref_phi, ref_q = held_reference(w, zeta, frame, step)
         if (zeta - np.sqrt(max(zeta * zeta - 1, 0.0))) * w * step > 30:  # Phi decayed to e^-30 (slowest rate)
             assert np.abs(phis[k]).max() < 1e-9 * max(1.0, w)
             continue

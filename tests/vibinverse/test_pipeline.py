@@ -134,12 +134,12 @@ def test_a_fit_beyond_the_memory_limit_is_refused_and_casadi_steps_aside(monkeyp
     scene = vi.load_scene(builtin_scene("roof_frame"), ["noise.sigma=0.6", "sampling.duration=5"])
     obs = vi.simulate(scene, seed=3)
     s = vi.series(obs.time, obs.intensity, scene=scene)
-    monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", str(10e6))  # 1000 samples: 25 MB for casadi, 3 MB in all
+    monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", str(10e6))  # 1000 samples: 25 MB for casadi, 2.5 MB in all
     with caplog.at_level(logging.INFO, logger="vibinverse"):
         result = vi.fit(s, scene, method="casadi")
     assert result.method == "map" and "above the memory limit" in caplog.text
     monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", str(1e6))
-    with pytest.raises(InputError, match=r"a fit of 1000 samples needs about 3 MB, above the memory limit 1 MB"):
+    with pytest.raises(InputError, match=r"a fit of 1000 samples needs about 2.5 MB, above the memory limit 1 MB"):
         vi.fit(s, scene, method="spectral")
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from forward.scene_file import load_scene
-from tests.conftest import SCENES, SNR10, K, frame_problem
+from tests.conftest import SCENES, SNR10, K, frame_problem, held_reference
 from vibinverse.fisher import crlb_sd
 from vibinverse.io.series import validate
 from vibinverse.models import build_model
@@ -212,7 +212,7 @@ def test_irregular_stamps_hold_the_base_force_over_each_frame():
     each of its round(step / dt) frames, built independently from matrix exponentials of the
     augmented system [[A, B], [0, 0]] and composed frame by frame, to 1e-9; the stationary start is
     P = Phi P Phi^T + Q at the frame step."""
-    from scipy.linalg import expm, solve_discrete_lyapunov
+    from scipy.linalg import solve_discrete_lyapunov
 
     m = 20
     prob = frame_problem(SNR10, "sampling.duration=5")
@@ -228,17 +228,7 @@ def test_irregular_stamps_hold_the_base_force_over_each_frame():
     w, zeta = 2 * np.pi * 3.0, 0.2
 
     def held(step):
-        parts = max(1, round(step / model.dt))
-        h = step / parts
-        aug = np.zeros((3, 3))
-        aug[:2, :2] = [[0.0, 1.0], [-w * w, -2 * zeta * w]]
-        aug[1, 2] = 1.0
-        e = expm(aug * h)
-        phi, q_frame = e[:2, :2], np.outer(e[:2, 2], e[:2, 2]) / h
-        out_phi, out_q = np.eye(2), np.zeros((2, 2))
-        for _ in range(parts):
-            out_phi, out_q = phi @ out_phi, phi @ out_q @ phi.T + q_frame
-        return out_phi, out_q
+        return held_reference(w, zeta, model.dt, step)
 
     for b in range(c.phis.shape[1] // 2):
         block = slice(2 * b, 2 * b + 2)
