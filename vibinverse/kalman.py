@@ -466,9 +466,12 @@ def held_oscillator_fill(w, a, kappa, steps, frame, phis, qs, b):  # pragma: no 
     for u in range(steps.shape[0]):
         m = max(1, math.floor(steps[u] / frame + 0.5))
         h = steps[u] / m
-        one = np.zeros((1, 2, 2))
-        oscillator_fill(w, a, 1.0, np.array([h]), one, np.zeros((1, 2, 2)), 0)
-        f11, f12, f21, f22 = one[0, 0, 0], one[0, 0, 1], one[0, 1, 0], one[0, 1, 1]
+        if m == 1:  # one frame (every step of a uniform grid): Phi(h) is the step's own
+            f11, f12, f21, f22 = phis[u, b, b], phis[u, b, b + 1], phis[u, b + 1, b], phis[u, b + 1, b + 1]
+        else:
+            one = np.zeros((1, 2, 2))
+            oscillator_fill(w, a, 1.0, np.array([h]), one, np.zeros((1, 2, 2)), 0)
+            f11, f12, f21, f22 = one[0, 0, 0], one[0, 0, 1], one[0, 1, 0], one[0, 1, 1]
         g2 = f12  # g(h)
         if rate * h < _SERIES_BELOW:  # integral of g: sum c[k] h^(k+1) / (k+1)
             g1 = 0.0
