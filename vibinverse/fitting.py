@@ -142,6 +142,8 @@ def fit_series(
         )
     if modal:
         result.diagnostics["model_order"] = [] if order is None else order.criterion
+        if order is not None and order.ambiguous:  # a line or resonance the data cannot tell from the other kind
+            result.diagnostics["ambiguous"] = [*result.diagnostics.get("ambiguous", []), *order.ambiguous]
         result.data["components"] = post.model.components(result.point)
         if order is not None:
             result.timing["model_order_s"] = order.seconds

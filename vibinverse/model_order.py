@@ -37,6 +37,14 @@ modulate (no other mode or line: the two readings are then one description, and 
 shorter). Otherwise, multiplicative or undecided, it is a slow variation, not a detected line: it
 is exchanged for the best (by BIC) of a gain drift of 6, 8 or 10 cosines and a random-walk drift,
 the criterion table says so, and the search goes on without proposing components of under 3 cycles.
+Last, each line is read as a resonance at its frequency and each narrow resonance (bandwidth
+within 4 Fourier bins) as a line, refitted in full (`settle_swaps`): the forward step keeps
+whichever of the two its spectral start fitted better first, and a lightly damped resonance is as
+steady as a line over a short record. A reading that lowers the BIC is taken; one less than 12.5
+below in ln L (the detection test's 5 sigma) whose resonance is resolved (bandwidth of a Fourier
+bin or more, i.e. the record spans more than pi decay times) is reported as ambiguous
+(`OrderResult.ambiguous`, the fit's `diagnostics["ambiguous"]`, the report and the verdict): the
+data cannot tell that resonance from a line.
 It stops when nothing changes, or at the caps (6 modes, 6 lines). A component the user fixes
 (`modes`, `lines`, `drift`, `noise` or `gain` in the `modal` table) is not searched.
 
@@ -71,6 +79,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize
 
+from vibinverse.detection import DETECTION_GAIN
 from vibinverse.errors import NumericalError
 from vibinverse.io.series import FEW_CYCLES, MIN_CYCLES, Series
 from vibinverse.models.modal import (
@@ -95,6 +104,8 @@ SPLIT_DAMPING = 0.05  # a mode this broad is also tried as two (`split_candidate
 SLOW_DAMPING = 0.5  # a mode this damped (or of under FEW_CYCLES cycles) is also tried as a drift
 SEARCHED = ("modes", "lines", "drift", "noise", "gain")
 NEAR_BANDWIDTHS, NEAR_BINS = 3.0, 4.0  # a mode this close to a new component is refitted with it (`near_modes`)
+AMBIGUITY_MARGIN = DETECTION_GAIN  # a reading closer than this in ln L is reported (`settle_swaps`)
+SWAP_BINS = 4.0  # a resonance this narrow (2 zeta f x span, in Fourier bins) is also read as a line (`swapped`)
 DECIDED = math.log(19.0)  # a reading 19 times likelier than the other (95 %) is decided (`slow_reading`)
 REPLICATES = 8  # draws of each reading for the modulation test's expected ratio
 
@@ -131,6 +142,7 @@ class OrderResult:
     fit: OrderFit
     criterion: list[dict[str, Any]] = field(default_factory=list)
     seconds: float = 0.0
+    ambiguous: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def spec(self) -> ModalSpec:
@@ -608,6 +620,89 @@ def settle_slow(
     return None
 
 
+def swapped(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[tuple[Candidate, float, bool]]:
+    """Each line read as a resonance at its frequency, and each narrow resonance (half-power
+    bandwidth 2 zeta f within SWAP_BINS Fourier bins) read as a line, as (candidate, frequency,
+    whether the candidate is the resonance reading): a lightly damped resonance is as steady as a
+    line over a short record, and the forward step keeps whichever of the two its spectral start
+    fits better first."""
+    spec, values = fit.spec, fit.values
+    span = max(fit.model.span, series.dt)
+    out: list[tuple[Candidate, float, bool]] = []
+    if not (search["modes"] and search["lines"]):
+        return out
+    for j in range(spec.lines):
+        f, a = values[f"lines[{j}].frequency"], values[f"lines[{j}].amplitude"]
+        if f * span < FEW_CYCLES or spec.modes >= MAX_MODES:
+            continue  # a slow line is read as a drift or a gain (`settle_slow`), not as a resonance
+        k = spec.modes
+        start = renumber(values, "lines", j, spec.lines)
+        mode = {f"modes[{k}].frequency": f, f"modes[{k}].rms": a / math.sqrt(2.0)}
+        starts = [{**start, **mode, f"modes[{k}].damping_ratio": b / (2.0 * f * span)} for b in (0.5, 3.0)]
+        what = f"the line at {f:.6g} Hz read as a resonance"
+        out.append((Candidate(what, replace(spec, lines=spec.lines - 1, modes=k + 1), starts, []), f, True))
+    for i in range(spec.modes):
+        f, z, rms = (values[f"modes[{i}].{p}"] for p in ("frequency", "damping_ratio", "rms"))
+        if bandwidth_bins(fit, f) > SWAP_BINS or f * span < FEW_CYCLES or spec.lines >= MAX_LINES:
+            continue
+        k = spec.lines
+        start = renumber(values, "modes", i, spec.modes)
+        line = {f"lines[{k}].frequency": f, f"lines[{k}].amplitude": rms * math.sqrt(2.0)}
+        starts = [{**start, **line, f"lines[{k}].phase": ph} for ph in (-2.0, 0.0, 2.0)]
+        what = f"the resonance at {f:.5g} Hz (zeta {z:.2g}) read as a line"
+        out.append((Candidate(what, replace(spec, modes=spec.modes - 1, lines=k + 1), starts, []), f, False))
+    return out
+
+
+def bandwidth_bins(fit: OrderFit, f: float) -> float:
+    """The half-power bandwidth 2 zeta f of `fit`'s mode nearest f, in Fourier bins (1 / span)."""
+    spec, values = fit.spec, fit.values
+    i = min(range(spec.modes), key=lambda i: abs(values[f"modes[{i}].frequency"] - f))
+    z, fi = values[f"modes[{i}].damping_ratio"], values[f"modes[{i}].frequency"]
+    return 2.0 * z * fi * max(fit.model.span, fit.model.dt)
+
+
+def settle_swaps(
+    series: Series, current: OrderFit, search: dict[str, bool], rows: list[dict[str, Any]], step: int
+) -> tuple[OrderFit | None, list[dict[str, Any]]]:
+    """Each line and narrow resonance of the chosen order read as the other kind (`swapped`),
+    refitted in full: (the best reading when it lowers the BIC, else None; the readings the data
+    cannot rule out, as `diagnostics["ambiguous"]` entries). A reading is ambiguous when it is less
+    than AMBIGUITY_MARGIN below the chosen one in ln L and its resonance is resolved (bandwidth
+    of a Fourier bin or more): a resonance narrower than that is, over the record, the same
+    steady oscillation as a line, and its damping ratio's interval already says how little is
+    known. Each reading is a row of the criterion table."""
+    readings = []
+    for c, f, as_mode in swapped(current, series, search):
+        alt = fit_order(series, c.spec, c.starts)
+        readings.append((c, alt, bandwidth_bins(alt if as_mode else current, f)))
+        rows.append(_row(step, c.what, alt, current.bic, "full", False))
+    if not readings:
+        return None, []
+    i = min(range(len(readings)), key=lambda i: readings[i][1].bic)
+    c, best, _ = readings[i]
+    if best.bic < current.bic:
+        rows[i - len(readings)]["kept"] = True
+        logger.info("model order: %s, BIC %.1f -> %.1f", c.what, current.bic, best.bic)
+        return best, []
+    ambiguous = []
+    for c, alt, bins in readings:
+        gap = current.log_likelihood - alt.log_likelihood
+        if gap < AMBIGUITY_MARGIN and bins >= 1.0:
+            values = {n: v for n, v in alt.values.items() if n.endswith((".frequency", ".damping_ratio"))}
+            ambiguous.append(
+                {
+                    "alternative": c.what,
+                    "delta_log_posterior": float(gap),
+                    "measure": "log likelihood",
+                    "values": values,
+                    "advice": "Whether this is a resonance or a steady line is not decided by these data: "
+                    "a longer record decides (a resonance's phase wanders over its decay time, a line's does not).",
+                }
+            )
+    return None, ambiguous
+
+
 def choose_order(
     series: Series,
     table: dict[str, Any] | None = None,
@@ -627,6 +722,7 @@ def choose_order(
     current = fit_order(series, spec, model0.guesses(model0.default_priors()))
     rows: list[dict[str, Any]] = [_row(0, "start: " + _describe(spec), current, None, "full", True)]
     logger.info("model order: %s, BIC %.1f", _describe(spec), current.bic)
+    ambiguous: list[dict[str, Any]] = []
     lowest = MIN_CYCLES  # after a slow line was read as a slow variation, none is proposed again
     step = 1
     while step <= max_steps:
@@ -637,11 +733,13 @@ def choose_order(
         if best is None:  # nothing lowers the BIC: does each slow line stand as a line?
             best = settle_slow(series, current, search, rows, step)
             lowest = FEW_CYCLES
+        if best is None:  # ... and is each line not a resonance, each narrow resonance not a line?
+            best, ambiguous = settle_swaps(series, current, search, rows, step)
         if best is None:
             break
         current = best
         step += 1
-    return OrderResult(current, rows, time.perf_counter() - t0)
+    return OrderResult(current, rows, time.perf_counter() - t0, ambiguous)
 
 
 def near_modes(c: Candidate, span: float) -> list[str]:

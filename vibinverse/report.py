@@ -237,10 +237,13 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
         if not isinstance(alt, dict):
             continue
         where = ", ".join(f"{k} = {format_number(v, '.5g')}" for k, v in (alt.get("values") or {}).items())
+        advice = alt.get("advice") or (
+            "Which line is which is not decided by these data: a longer record or a prior on the resonance decides."
+        )
         out.append(
             f"The data cannot tell this fit from another reading ({alt.get('alternative')}: {where}), only "
-            f"{format_number(alt.get('delta_log_posterior'), '.1f')} below in log posterior (5 sigma would be 12.5). "
-            "Which line is which is not decided by these data: a longer record or a prior on the resonance decides."
+            f"{format_number(alt.get('delta_log_posterior'), '.1f')} below in {alt.get('measure', 'log posterior')} "
+            f"(5 sigma would be 12.5). {advice}"
         )
     few = d.get("few_cycles")
     for n, cycles in few.items() if isinstance(few, dict) else ():

@@ -404,3 +404,56 @@ def test_a_line_next_to_a_resonance_is_found_with_the_mode_refitted():
     assert (result.spec.modes, result.spec.lines) == (1, 1)
     assert result.values["modes[0].frequency"] == pytest.approx(2 * math.sqrt(3), rel=0.01)
     assert result.values["lines[0].frequency"] == pytest.approx(4.0, abs=1e-2)
+
+
+def test_a_resonance_kept_as_a_line_is_read_again_as_a_resonance():
+    """A resonance the forward step took for a line (here forced: the order 0 modes, 1 line) is
+    read again as a resonance at the line's frequency (`settle_swaps`), which lowers the BIC (by
+    ~670: its amplitude and phase wander over the record), and is kept."""
+    from vibinverse.model_order import SEARCHED, fit_order, settle_swaps
+
+    t, y = simulate(2000, modes=[(3.0, 0.005, 0.3)], sigma=0.5, seed=0)
+    s = vi.series(t, y)
+    start = {"level": 0.0, "noise.sigma": 0.5, "lines[0].frequency": 3.0, "lines[0].amplitude": 0.4}
+    as_line = fit_order(s, ModalSpec(0, 1, "none", "white"), [{**start, "lines[0].phase": p} for p in (-2, 0, 2)])
+    rows: list = []
+    best, ambiguous = settle_swaps(s, as_line, dict.fromkeys(SEARCHED, True), rows, 1)
+    assert best is not None and (best.spec.modes, best.spec.lines) == (1, 0)
+    assert best.values["modes[0].frequency"] == pytest.approx(3.0, abs=0.01)
+    assert as_line.bic - best.bic > 2 * 100
+    assert ambiguous == [] and [r["kept"] for r in rows] == [True]
+
+
+def test_a_steady_line_is_not_reported_as_a_possible_resonance():
+    """The line of a line + resonance series is read as a resonance too (a row of the criterion
+    table); the resonance reading is an unresolved one (bandwidth under a Fourier bin: the same
+    steady oscillation over the record), so it is no ambiguity to report."""
+    t, y = simulate(3000, modes=[(2.3, 0.02, 0.6)], sigma=0.5, lines=[(5.1, 0.15, 0.7)], seed=0)
+    res = choose_order(vi.series(t, y))
+    rows = [r for r in res.criterion if r["tried"].startswith("the line at 5.1")]
+    assert rows and rows[-1]["tried"].endswith("read as a resonance") and not rows[-1]["kept"]
+    assert res.ambiguous == []
+
+
+def test_a_resonance_a_line_fits_almost_as_well_is_reported_as_ambiguous():
+    """A weak narrow resonance (zeta 0.004, bandwidth ~2.9 Fourier bins over the record) that a
+    steady line fits only 5.5 below in ln L: the resonance is kept (the better reading), and the
+    line reading is reported in the diagnostics, the report and the verdict (5 sigma, 12.5, would
+    have decided)."""
+    from vibinverse.model_order import AMBIGUITY_MARGIN
+    from vibinverse.report import warnings_for
+    from vibinverse.verdict import verdict
+
+    t, y = simulate(2000, modes=[(3.0, 0.004, 0.2)], sigma=0.5, seed=3)
+    res = choose_order(vi.series(t, y))
+    assert (res.spec.modes, res.spec.lines) == (1, 0)
+    (alt,) = res.ambiguous
+    assert alt["alternative"].startswith("the resonance at 3") and alt["alternative"].endswith("read as a line")
+    assert 0 < alt["delta_log_posterior"] < AMBIGUITY_MARGIN
+    assert alt["values"]["lines[0].frequency"] == pytest.approx(3.0, abs=0.01)
+    result = vi.fit(vi.series(t, y), method="map")
+    assert result.diagnostics["ambiguous"][0]["alternative"] == alt["alternative"]
+    summary = result.summary()
+    assert "another reading fits as well" in verdict(summary).trust_summary
+    (warning,) = [w for w in warnings_for(summary, None, []) if "another reading" in w]
+    assert "read as a line" in warning and "in log likelihood" in warning and "a longer record decides" in warning
