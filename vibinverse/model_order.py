@@ -38,7 +38,8 @@ shorter). Otherwise, multiplicative or undecided, it is a slow variation, not a 
 is exchanged for the best (by BIC) of a gain drift of 6, 8 or 10 cosines and a random-walk drift,
 the criterion table says so, and the search goes on without proposing components of under 3 cycles.
 Last, each line is read as a resonance at its frequency and each narrow resonance (bandwidth
-within 4 Fourier bins) as a line, refitted in full (`settle_swaps`): the forward step keeps
+within 4 Fourier bins) as a line (`settle_swaps`; partial fits, refitted in full where a reading
+may win or be ambiguous): the forward step keeps
 whichever of the two its spectral start fitted better first, and a lightly damped resonance is as
 steady as a line over a short record. A reading that lowers the BIC is taken; one less than 12.5
 below in ln L (the detection test's 5 sigma) whose resonance is resolved (bandwidth of a Fourier
@@ -640,7 +641,8 @@ def swapped(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[tupl
         mode = {f"modes[{k}].frequency": f, f"modes[{k}].rms": a / math.sqrt(2.0)}
         starts = [{**start, **mode, f"modes[{k}].damping_ratio": b / (2.0 * f * span)} for b in (0.5, 3.0)]
         what = f"the line at {f:.6g} Hz read as a resonance"
-        out.append((Candidate(what, replace(spec, lines=spec.lines - 1, modes=k + 1), starts, []), f, True))
+        new = [f"modes[{k}].{p}" for p in ("frequency", "damping_ratio", "rms")]
+        out.append((Candidate(what, replace(spec, lines=spec.lines - 1, modes=k + 1), starts, new), f, True))
     for i in range(spec.modes):
         f, z, rms = (values[f"modes[{i}].{p}"] for p in ("frequency", "damping_ratio", "rms"))
         if bandwidth_bins(fit, f) > SWAP_BINS or f * span < FEW_CYCLES or spec.lines >= MAX_LINES:
@@ -650,7 +652,8 @@ def swapped(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[tupl
         line = {f"lines[{k}].frequency": f, f"lines[{k}].amplitude": rms * math.sqrt(2.0)}
         starts = [{**start, **line, f"lines[{k}].phase": ph} for ph in (-2.0, 0.0, 2.0)]
         what = f"the resonance at {f:.5g} Hz (zeta {z:.2g}) read as a line"
-        out.append((Candidate(what, replace(spec, modes=spec.modes - 1, lines=k + 1), starts, []), f, False))
+        new = [f"lines[{k}].{p}" for p in ("frequency", "amplitude", "phase")]
+        out.append((Candidate(what, replace(spec, modes=spec.modes - 1, lines=k + 1), starts, new), f, False))
     return out
 
 
@@ -665,30 +668,42 @@ def bandwidth_bins(fit: OrderFit, f: float) -> float:
 def settle_swaps(
     series: Series, current: OrderFit, search: dict[str, bool], rows: list[dict[str, Any]], step: int
 ) -> tuple[OrderFit | None, list[dict[str, Any]]]:
-    """Each line and narrow resonance of the chosen order read as the other kind (`swapped`),
-    refitted in full: (the best reading when it lowers the BIC, else None; the readings the data
-    cannot rule out, as `diagnostics["ambiguous"]` entries). A reading is ambiguous when it is less
+    """Each line and narrow resonance of the chosen order read as the other kind (`swapped`), fitted
+    with only the new component, the level, the white noise and the modes near it free, and
+    refitted in full when it may lower the BIC (within 0.5 ln n, as in `_best_move`) or be a
+    resolved reading within the margin: (the best reading when it lowers the BIC, else None; the
+    readings the data cannot rule out, as `diagnostics["ambiguous"]` entries). A reading is ambiguous when it is less
     than AMBIGUITY_MARGIN below the chosen one in ln L and its resonance is resolved (bandwidth
     of a Fourier bin or more): a resonance narrower than that is, over the record, the same
     steady oscillation as a line, and its damping ratio's interval already says how little is
     known. Each reading is a row of the criterion table."""
+    slack = 0.5 * math.log(current.n)
     readings = []
     for c, f, as_mode in swapped(current, series, search):
-        alt = fit_order(series, c.spec, c.starts)
-        readings.append((c, alt, bandwidth_bins(alt if as_mode else current, f)))
-        rows.append(_row(step, c.what, alt, current.bic, "full", False))
+        keep = [*c.new, "level", "noise.sigma", *near_modes(c, current.model.span)]
+        alt = fit_order(series, c.spec, c.starts, free=keep, maxiter=60, ftol=1e-9)
+        bins = bandwidth_bins(alt if as_mode else current, f)
+        # refitted in full only when it may win, or be a resolved reading within the margin
+        full = alt.bic < current.bic + slack or (
+            current.log_likelihood - alt.log_likelihood < AMBIGUITY_MARGIN + slack and bins >= 0.5
+        )
+        if full:
+            alt = fit_order(series, c.spec, [alt.values])
+            bins = bandwidth_bins(alt if as_mode else current, f)
+        readings.append((c, alt, bins, full))
+        rows.append(_row(step, c.what, alt, current.bic, "full" if full else "partial", False))
     if not readings:
         return None, []
     i = min(range(len(readings)), key=lambda i: readings[i][1].bic)
-    c, best, _ = readings[i]
-    if best.bic < current.bic:
+    c, best, _, full = readings[i]
+    if full and best.bic < current.bic:
         rows[i - len(readings)]["kept"] = True
         logger.info("model order: %s, BIC %.1f -> %.1f", c.what, current.bic, best.bic)
         return best, []
     ambiguous = []
-    for c, alt, bins in readings:
+    for c, alt, bins, full in readings:
         gap = current.log_likelihood - alt.log_likelihood
-        if gap < AMBIGUITY_MARGIN and bins >= 1.0:
+        if full and gap < AMBIGUITY_MARGIN and bins >= 1.0:
             values = {n: v for n, v in alt.values.items() if n.endswith((".frequency", ".damping_ratio"))}
             ambiguous.append(
                 {

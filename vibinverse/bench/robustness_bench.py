@@ -14,7 +14,7 @@ Fitters (`Fitter`: `name`, `fit(t, y, order=None) -> FitOutcome`):
 
 The peers fit the order they are given: the true one (for noise_only, the clean case's: what an
 analyst expecting the clean case would fit); SSI-cov reports whatever its stabilization diagram
-shows. Ours with BIC chooses its own order. `run(quick=True)` runs 8 data sets per case at half
+shows. Ours with BIC chooses its own order. `run(quick=True)` runs 6 data sets per case at half
 the durations with ours, celerite2 and SSI-cov; the full run 50 with all five.
 
 Metrics per case, method and parameter over N data sets (`score`): the median relative error of
@@ -52,6 +52,7 @@ from vibinverse.bench.robustness_peers import Celerite2Fitter, SSIFitter
 LOG = logging.getLogger(__name__).info
 
 MATCH_TOL = 0.05  # a fitted component matches a true one within 5 % of its frequency
+QUICK_SETS = 6  # data sets per case with `quick` (8 took 5 min 10 s on 2 cores with the line/resonance readings)
 
 
 def modal_available() -> str | None:
@@ -323,7 +324,7 @@ def run(
     with_oracle: bool = True,
     oracle_refit: bool = True,
 ) -> dict[str, Any]:
-    """The comparison: N data sets per case (`n`; default 50, or 8 with `quick`, which also halves
+    """The comparison: N data sets per case (`n`; default 50, or QUICK_SETS (6) with `quick`, which also halves
     every record's duration), each fitted by every fitter (names or Fitter objects; default: ours,
     ours-fixed, celerite2 and ssi-cov, without ours-fixed with `quick`; one whose package or code
     is missing is skipped with a note), `workers` processes over the data sets; `with_oracle`:
@@ -332,7 +333,7 @@ def run(
     where the Kalman filter is exact). Returns {"rows", "skipped", "notes", "settings", "seconds"},
     JSON-able; rows as `score` makes them."""
     t_start = time.perf_counter()
-    n = n if n is not None else (8 if quick else 50)
+    n = n if n is not None else (QUICK_SETS if quick else 50)
     if fitters is None:
         fitters = QUICK_FITTERS if quick else FITTERS
     cases = list(cases) if cases is not None else list(CASES)

@@ -22,7 +22,7 @@ import numpy as np
 
 FINE = 20  # the irregular case's stamps lie on a grid FINE x finer than the nominal one
 LEVEL = 2.0  # the series' level: the gain drift moves it by +-0.4, about the drift case's peak to peak
-QUICK_FRACTION = 0.5  # `quick`: every record at half its duration (and 8 data sets)
+QUICK_FRACTION = 0.5  # `quick`: every record at half its duration (and 6 data sets)
 
 
 # ------------------------------------------------------------------ the cases
