@@ -41,9 +41,9 @@ Last, each line is read as a resonance at its frequency and each narrow resonanc
 within 4 Fourier bins) as a line (`settle_swaps`; partial fits, refitted in full where a reading
 may win or be ambiguous): the forward step keeps
 whichever of the two its spectral start fitted better first, and a lightly damped resonance is as
-steady as a line over a short record. A reading that lowers the BIC is taken; one less than 12.5
-below in ln L (the detection test's 5 sigma) whose resonance is resolved (bandwidth of a Fourier
-bin or more, i.e. the record spans more than pi decay times) is reported as ambiguous
+steady as a line over a short record. A reading that lowers the BIC is taken; one less than
+ln 19 below in ln L (not decided at 19 : 1, as in the modulation test) whose resonance is resolved
+(bandwidth of a Fourier bin or more: the record spans more than pi decay times) is reported
 (`OrderResult.ambiguous`, the fit's `diagnostics["ambiguous"]`, the report and the verdict): the
 data cannot tell that resonance from a line.
 It stops when nothing changes, or at the caps (6 modes, 6 lines). A component the user fixes
@@ -80,7 +80,6 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize
 
-from vibinverse.detection import DETECTION_GAIN
 from vibinverse.errors import NumericalError
 from vibinverse.io.series import FEW_CYCLES, MIN_CYCLES, Series
 from vibinverse.models.modal import (
@@ -105,9 +104,10 @@ SPLIT_DAMPING = 0.05  # a mode this broad is also tried as two (`split_candidate
 SLOW_DAMPING = 0.5  # a mode this damped (or of under FEW_CYCLES cycles) is also tried as a drift
 SEARCHED = ("modes", "lines", "drift", "noise", "gain")
 NEAR_BANDWIDTHS, NEAR_BINS = 3.0, 4.0  # a mode this close to a new component is refitted with it (`near_modes`)
-AMBIGUITY_MARGIN = DETECTION_GAIN  # a reading closer than this in ln L is reported (`settle_swaps`)
 SWAP_BINS = 4.0  # a resonance this narrow (2 zeta f x span, in Fourier bins) is also read as a line (`swapped`)
-DECIDED = math.log(19.0)  # a reading 19 times likelier than the other (95 %) is decided (`slow_reading`)
+DECIDED = math.log(
+    19.0
+)  # a reading 19 times likelier than the other (95 %) is decided (`slow_reading`, `settle_swaps`)
 REPLICATES = 8  # draws of each reading for the modulation test's expected ratio
 
 
@@ -672,10 +672,12 @@ def settle_swaps(
     with only the new component, the level, the white noise and the modes near it free, and
     refitted in full when it may lower the BIC (within 0.5 ln n, as in `_best_move`) or be a
     resolved reading within the margin: (the best reading when it lowers the BIC, else None; the
-    readings the data cannot rule out, as `diagnostics["ambiguous"]` entries). A reading is ambiguous when it is less
-    than AMBIGUITY_MARGIN below the chosen one in ln L and its resonance is resolved (bandwidth
-    of a Fourier bin or more): a resonance narrower than that is, over the record, the same
-    steady oscillation as a line, and its damping ratio's interval already says how little is
+    readings the data cannot rule out, as `diagnostics["ambiguous"]` entries). A reading is
+    ambiguous when it is less than DECIDED (ln 19, the two-readings test of `slow_reading`: both
+    have the same parameters and frequency, so no look-elsewhere term enters) below the chosen one
+    in ln L and its resonance is resolved (bandwidth of a Fourier bin or more): a resonance
+    narrower than that is, over the record, the same steady oscillation as a line, and its damping
+    ratio's interval already says how little is
     known. Each reading is a row of the criterion table."""
     slack = 0.5 * math.log(current.n)
     readings = []
@@ -685,7 +687,7 @@ def settle_swaps(
         bins = bandwidth_bins(alt if as_mode else current, f)
         # refitted in full only when it may win, or be a resolved reading within the margin
         full = alt.bic < current.bic + slack or (
-            current.log_likelihood - alt.log_likelihood < AMBIGUITY_MARGIN + slack and bins >= 0.5
+            current.log_likelihood - alt.log_likelihood < DECIDED + slack and bins >= 0.5
         )
         if full:
             alt = fit_order(series, c.spec, [alt.values])
@@ -703,13 +705,14 @@ def settle_swaps(
     ambiguous = []
     for c, alt, bins, full in readings:
         gap = current.log_likelihood - alt.log_likelihood
-        if full and gap < AMBIGUITY_MARGIN and bins >= 1.0:
+        if full and gap < DECIDED and bins >= 1.0:
             values = {n: v for n, v in alt.values.items() if n.endswith((".frequency", ".damping_ratio"))}
             ambiguous.append(
                 {
                     "alternative": c.what,
                     "delta_log_posterior": float(gap),
                     "measure": "log likelihood",
+                    "decided_at": f"19 : 1, {DECIDED:.1f}, would decide",
                     "values": values,
                     "advice": "Whether this is a resonance or a steady line is not decided by these data: "
                     "a longer record decides (a resonance's phase wanders over its decay time, a line's does not).",

@@ -243,7 +243,7 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
         out.append(
             f"The data cannot tell this fit from another reading ({alt.get('alternative')}: {where}), only "
             f"{format_number(alt.get('delta_log_posterior'), '.1f')} below in {alt.get('measure', 'log posterior')} "
-            f"(5 sigma would be 12.5). {advice}"
+            f"({alt.get('decided_at', '5 sigma would be 12.5')}). {advice}"
         )
     few = d.get("few_cycles")
     for n, cycles in few.items() if isinstance(few, dict) else ():
