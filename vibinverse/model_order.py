@@ -621,7 +621,9 @@ def settle_slow(
     return None
 
 
-def swapped(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[tuple[Candidate, float, bool]]:
+def swapped(
+    fit: OrderFit, series: Series, search: dict[str, bool], caps: tuple[int, int] = (MAX_MODES, MAX_LINES)
+) -> list[tuple[Candidate, float, bool]]:
     """Each line read as a resonance at its frequency, and each narrow resonance (half-power
     bandwidth 2 zeta f within SWAP_BINS Fourier bins) read as a line, as (candidate, frequency,
     whether the candidate is the resonance reading): a lightly damped resonance is as steady as a
@@ -634,7 +636,7 @@ def swapped(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[tupl
         return out
     for j in range(spec.lines):
         f, a = values[f"lines[{j}].frequency"], values[f"lines[{j}].amplitude"]
-        if f * span < FEW_CYCLES or spec.modes >= MAX_MODES:
+        if f * span < FEW_CYCLES or spec.modes >= caps[0]:
             continue  # a slow line is read as a drift or a gain (`settle_slow`), not as a resonance
         k = spec.modes
         start = renumber(values, "lines", j, spec.lines)
@@ -645,7 +647,7 @@ def swapped(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[tupl
         out.append((Candidate(what, replace(spec, lines=spec.lines - 1, modes=k + 1), starts, new), f, True))
     for i in range(spec.modes):
         f, z, rms = (values[f"modes[{i}].{p}"] for p in ("frequency", "damping_ratio", "rms"))
-        if bandwidth_bins(fit, f) > SWAP_BINS or f * span < FEW_CYCLES or spec.lines >= MAX_LINES:
+        if bandwidth_bins(fit, f) > SWAP_BINS or f * span < FEW_CYCLES or spec.lines >= caps[1]:
             continue
         k = spec.lines
         start = renumber(values, "modes", i, spec.modes)
@@ -666,7 +668,12 @@ def bandwidth_bins(fit: OrderFit, f: float) -> float:
 
 
 def settle_swaps(
-    series: Series, current: OrderFit, search: dict[str, bool], rows: list[dict[str, Any]], step: int
+    series: Series,
+    current: OrderFit,
+    search: dict[str, bool],
+    rows: list[dict[str, Any]],
+    step: int,
+    caps: tuple[int, int] = (MAX_MODES, MAX_LINES),
 ) -> tuple[OrderFit | None, list[dict[str, Any]]]:
     """Each line and narrow resonance of the chosen order read as the other kind (`swapped`), fitted
     with only the new component, the level, the white noise and the modes near it free, and
@@ -681,7 +688,7 @@ def settle_swaps(
     known. Each reading is a row of the criterion table."""
     slack = 0.5 * math.log(current.n)
     readings = []
-    for c, f, as_mode in swapped(current, series, search):
+    for c, f, as_mode in swapped(current, series, search, caps):
         keep = [*c.new, "level", "noise.sigma", *near_modes(c, current.model.span)]
         alt = fit_order(series, c.spec, c.starts, free=keep, maxiter=60, ftol=1e-9)
         bins = bandwidth_bins(alt if as_mode else current, f)
@@ -752,7 +759,7 @@ def choose_order(
             best = settle_slow(series, current, search, rows, step)
             lowest = FEW_CYCLES
         if best is None:  # ... and is each line not a resonance, each narrow resonance not a line?
-            best, ambiguous = settle_swaps(series, current, search, rows, step)
+            best, ambiguous = settle_swaps(series, current, search, rows, step, (max_modes, max_lines))
         if best is None:
             break
         current = best

@@ -422,6 +422,8 @@ def test_a_resonance_kept_as_a_line_is_read_again_as_a_resonance():
     assert best.values["modes[0].frequency"] == pytest.approx(3.0, abs=0.01)
     assert as_line.bic - best.bic > 2 * 100
     assert ambiguous == [] and [r["kept"] for r in rows] == [True]
+    # a search capped at no resonance (choose_order's max_modes) does not read the line as one
+    assert settle_swaps(s, as_line, dict.fromkeys(SEARCHED, True), [], 1, (0, 6)) == (None, [])
 
 
 def test_a_steady_line_is_not_reported_as_a_possible_resonance():
