@@ -182,6 +182,7 @@ def test_three_close_modes_are_not_left_as_one_broad_hump(seed):
         assert got == pytest.approx(f, rel=0.02)  # a few half-power widths of 1-3 %
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [2, 7])
 def test_a_trend_is_a_drift_not_a_slow_mode(seed):
     """The robustness bench's drift case (its own simulator: a quadratic trend plus a random walk,
@@ -198,6 +199,7 @@ def test_a_trend_is_a_drift_not_a_slow_mode(seed):
     assert freqs(res, "line") == [pytest.approx(10.0, abs=5e-3)]  # a tenth of the resolution 1 / 20 s
 
 
+@pytest.mark.slow
 def test_a_slow_level_change_is_not_kept_as_a_line():
     """The robustness bench's gain-drift case, seed 14 (the level times 1 + g, g sinusoids of 0.5-3
     cycles per record): the search had kept a line at 0.08 Hz (1.6 cycles in 20 s) for the level's

@@ -112,6 +112,7 @@ def test_sigterm_exits_143_and_workers_stop_without_tracebacks(short_data):
     assert not (d / "pool" / "result.nc").exists() and not (d / "term" / "result.nc").exists()
 
 
+@pytest.mark.slow
 def test_resume_refuses_a_checkpoint_of_other_data_scene_or_priors(short_data, tmp_path):
     d = short_data
     first = run_cli(*fit_args(d, "ident", steps=100))
