@@ -39,13 +39,13 @@ is exchanged for the best (by BIC) of a gain drift of 6, 8 or 10 cosines and a r
 the criterion table says so, and the search goes on without proposing components of under 3 cycles.
 Last, each line is read as a resonance at its frequency and each narrow resonance (bandwidth
 within 4 Fourier bins) as a line (`settle_swaps`; partial fits, refitted in full where a reading
-may win or be ambiguous): the forward step keeps
-whichever of the two its spectral start fitted better first, and a lightly damped resonance is as
-steady as a line over a short record. A reading that lowers the BIC is taken; one less than
-ln 19 below in ln L (not decided at 19 : 1, as in the modulation test) whose resonance is resolved
-(bandwidth of a Fourier bin or more: the record spans more than pi decay times) is reported
-(`OrderResult.ambiguous`, the fit's `diagnostics["ambiguous"]`, the report and the verdict): the
-data cannot tell that resonance from a line.
+may win or be ambiguous): the forward step keeps whichever of the two its spectral start fitted
+better first, and a lightly damped resonance is as steady as a line over a short record. A reading
+that lowers the BIC is taken; one less than ln 19 below in ln L (not decided at 19 : 1, as in the
+modulation test) whose resonance is resolved (bandwidth of a Fourier bin or more: the record spans
+more than pi decay times) is reported (`OrderResult.ambiguous`, the fit's
+`diagnostics["ambiguous"]`, the report and the verdict): the data cannot tell that resonance from
+a line.
 It stops when nothing changes, or at the caps (6 modes, 6 lines). A component the user fixes
 (`modes`, `lines`, `drift`, `noise` or `gain` in the `modal` table) is not searched.
 
@@ -105,9 +105,8 @@ SLOW_DAMPING = 0.5  # a mode this damped (or of under FEW_CYCLES cycles) is also
 SEARCHED = ("modes", "lines", "drift", "noise", "gain")
 NEAR_BANDWIDTHS, NEAR_BINS = 3.0, 4.0  # a mode this close to a new component is refitted with it (`near_modes`)
 SWAP_BINS = 4.0  # a resonance this narrow (2 zeta f x span, in Fourier bins) is also read as a line (`swapped`)
-DECIDED = math.log(
-    19.0
-)  # a reading 19 times likelier than the other (95 %) is decided (`slow_reading`, `settle_swaps`)
+#: a reading 19 times likelier than the other (95 %) is decided (`slow_reading`, `settle_swaps`)
+DECIDED = math.log(19.0)
 REPLICATES = 8  # draws of each reading for the modulation test's expected ratio
 
 
@@ -684,8 +683,9 @@ def settle_swaps(
     have the same parameters and frequency, so no look-elsewhere term enters) below the chosen one
     in ln L and its resonance is resolved (bandwidth of a Fourier bin or more): a resonance
     narrower than that is, over the record, the same steady oscillation as a line, and its damping
-    ratio's interval already says how little is
-    known. Each reading is a row of the criterion table."""
+    ratio's interval already says how little is known. Each reading is a row of the criterion
+    table. After a reading is taken the search goes on, and the next call reads every component
+    again (the unchanged ones too: one partial fit each)."""
     slack = 0.5 * math.log(current.n)
     readings = []
     for c, f, as_mode in swapped(current, series, search, caps):
