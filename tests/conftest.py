@@ -1,6 +1,8 @@
 """What several test modules share: the example scenes, simulated series and posteriors of the frame
 and deterministic models, built-in scene tables, the quick study results and the command line."""
 
+import contextlib
+import io
 import json
 import os
 import subprocess
@@ -14,6 +16,7 @@ from scipy.linalg import expm
 
 from forward.scene_file import apply_overrides, load_scene, read_table, scene_from_table
 from forward.sensor import observe
+from vibinverse.cli import main
 from vibinverse.io.builtin import builtin_scene
 from vibinverse.io.series import Series, validate
 from vibinverse.models import build_model
@@ -141,8 +144,27 @@ def results(tmp_path_factory):
 # ------------------------------------------------------------------ the command line
 
 
-def run_cli(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "vibinverse", *args], capture_output=True, text=True, **kw)
+def run_cli(*args: str, cwd: str | Path | None = None, fresh: bool = False) -> subprocess.CompletedProcess:
+    """The command line on `args`: its exit code, stdout and stderr. By default in this process,
+    through `main` as `python -m vibinverse` runs it but without starting an interpreter and
+    importing the toolkit again (~3 s a call on a slow machine); with `fresh`, in a new interpreter
+    (the entry point itself, signals, a cold start). An error `main` lets through (a traceback in a
+    real run) fails the test here."""
+    if fresh:
+        command = [sys.executable, "-m", "vibinverse", *args]
+        return subprocess.run(command, capture_output=True, text=True, cwd=cwd)
+    out, err, here = io.StringIO(), io.StringIO(), os.getcwd()
+    try:
+        if cwd is not None:
+            os.chdir(cwd)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(list(args))
+            except SystemExit as exc:  # argparse: --version, --help, a usage error
+                code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    finally:
+        os.chdir(here)
+    return subprocess.CompletedProcess(["vibinverse", *args], code, out.getvalue(), err.getvalue())
 
 
 @pytest.fixture(scope="session")

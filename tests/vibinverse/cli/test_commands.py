@@ -127,10 +127,10 @@ def test_missing_scene_and_unwritable_output(tmp_path):
 
 @pytest.mark.slow
 def test_version_and_demo(tmp_path):
-    r = run_cli("--version")
+    r = run_cli("--version", fresh=True)
     assert r.returncode == 0 and r.stdout.startswith("vibinverse ")
     out = tmp_path / "demo"
-    r = run_cli("demo", "-o", str(out), "--no-progress", "--json")
+    r = run_cli("demo", "-o", str(out), "--no-progress", "--json", fresh=True)  # the main job, cold
     assert r.returncode == 0, r.stderr
     assert "report:" in r.stderr and "R-hat" in r.stderr  # the log, on stderr with --json
     doc = strict_json(r.stdout)
