@@ -158,21 +158,21 @@ def test_stretch_lengths_grow_to_the_whole_record():
 
 @pytest.mark.slow
 def test_a_long_record_s_map_over_stretches_equals_the_whole_record_map(monkeypatch, caplog):
-    """A 120 s frame record (24 000 samples) with the long-record threshold lowered to 8000: the MAP
-    found on 2000 samples and polished on 8000 and 24 000 (`stretched_map`) is the MAP of the whole
+    """A 60 s frame record (12 000 samples) with the long-record threshold lowered to 4000: the MAP
+    found on 1000 samples and polished on 4000 and 12 000 (`stretched_map`) is the MAP of the whole
     record: every value within 0.05 of its sd, every sd within 2 % (the Laplace covariance of the
     same optimum)."""
     import logging
 
     import vibinverse.pipeline as pipeline
 
-    prob = frame_problem(SNR10, "sampling.duration=120")
+    prob = frame_problem(SNR10, "sampling.duration=60")
     whole = run(prob, "map")
-    monkeypatch.setattr(pipeline, "LONG_RECORD", 8000)
+    monkeypatch.setattr(pipeline, "LONG_RECORD", 4000)
     with caplog.at_level(logging.INFO, logger="vibinverse"):
         stretched = run(prob, "map")
-    assert "the MAP starts on its first 2000 samples, then 8000, 24000" in caplog.text
-    assert stretched.diagnostics["map_stretches"] == [2000, 8000, 24000]
+    assert "the MAP starts on its first 1000 samples, then 4000, 12000" in caplog.text
+    assert stretched.diagnostics["map_stretches"] == [1000, 4000, 12000]
     assert stretched.log_post == pytest.approx(whole.log_post, abs=0.05)
     for n in prob.space.names:
         assert abs(stretched.point[n] - whole.point[n]) <= 0.05 * whole.sd[n], n

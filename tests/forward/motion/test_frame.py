@@ -90,7 +90,7 @@ def test_nonlinear_conserves_energy_through_the_flat_equilibrium():
     nl = NonlinearFrame(undamped)
     # starts exactly flat (the Euler-angle singularity) and spins about all three axes
     s0 = np.concatenate([[1e-3, -2e-3, 3e-3], np.zeros(3), [1.0, 0.0, 0.0, 0.0], [0.02, -0.015, 0.01]])
-    t = np.linspace(0.0, 100.0, 2001)
+    t = np.linspace(0.0, 25.0, 501)  # 50 periods and more: its modes lie at 2-4 Hz
     states = nl.simulate(t, s0, rtol=1e-9, atol=1e-15)
     energy = np.array([nl.energy(s) for s in states])
     assert np.abs(energy / energy[0] - 1).max() < 1e-6
