@@ -44,8 +44,11 @@ STALL_STEP, STALL_F = 1e-9, 1e-12
 # or below NEWTON_DONE_SD in the posterior's own metric (sqrt(step' H step), in posterior standard
 # deviations): on a weakly determined parameter the step the rounded gradient asks for can exceed
 # 1e-8 in z while it is 1e-7 sd (sec. 4.2 frame, 20 s, seed 3: steps of 2-5e-8 in z, each changing
-# f by +-3e-7, its rounding, so f could not confirm them and the solve ran 280 more iterations)
-NEWTON_REACH, NEWTON_DONE, NEWTON_DONE_SD, NEWTON_F, NEWTON_STEPS = 1e-3, 1e-8, 1e-6, 1e-11, 5
+# f by +-3e-7, its rounding, so f could not confirm them and the solve ran 280 more iterations).
+# That rounding, +-3e-7 on f ~ -2.1e4 (1.4e-11 relative), is why NEWTON_F is 1e-10: at 1e-11 the
+# first Newton step from a stalled point (20 s, seed 1: gradient 0.08, predicted decrease 6e-11)
+# was refused for an f 2.8e-7 higher, and the run ended at the stalled point
+NEWTON_REACH, NEWTON_DONE, NEWTON_DONE_SD, NEWTON_F, NEWTON_STEPS = 1e-3, 1e-8, 1e-6, 1e-10, 5
 # a run with a floor ends once f - CUT_FACTOR x (the decrease the Newton model still predicts) lies
 # above the floor; checked at most MAX_CHECKS times a run (`_Watch.below_floor`)
 CUT_FACTOR, MAX_CHECKS = 10.0, 3
