@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
+from scipy.integrate import quad
 
-from forward.brdf import lambertian, lobe_normalization, specular_lobe
+from forward.brdf import lambertian, lobe_normalization, lobe_solid_angle, specular_lobe
 from forward.geometry import angle_between
 
 
@@ -21,6 +22,36 @@ def directional_hemispherical_reflectance(m, theta_i, reflectance=0.7):
     cos_i = np.cos(theta_i)
     b = specular_lobe(cos_i, view[..., 2], angle_between(view, n_r), reflectance, m, np.full(T.shape, theta_i))
     return np.sum(b / cos_i * view[..., 2] * np.sin(T) * tw[:, None] * pw[None, :]) / reflectance
+
+
+def solid_angle_by_adaptive_quadrature(m, theta_i, support=12.0):
+    """The lobe's solid angle as two adaptive quadratures (scipy's quad at 1e-12): the cones around
+    the mirror direction entirely above the horizon, then those the horizon cuts, whose azimuth span
+    above it is 2 arccos(-cot(theta_i) cot(alpha))."""
+    top = min(np.pi, support * m)
+    full, cut = min(max(np.pi / 2 - theta_i, 0.0), top), min(np.pi / 2 + theta_i, top)
+    val = 2 * np.pi * quad(lambda a: np.exp(-0.5 * (a / m) ** 2) * np.sin(a), 0.0, full, epsabs=0.0, epsrel=1e-12)[0]
+    if cut > full:
+        cot_t = np.cos(theta_i) / np.sin(theta_i)
+
+        def clipped(a):
+            span = 2.0 * np.arccos(np.clip(-cot_t * np.cos(a) / np.sin(a), -1.0, 1.0))
+            return np.exp(-0.5 * (a / m) ** 2) * np.sin(a) * span
+
+        val += quad(clipped, full, cut, epsabs=0.0, epsrel=1e-11, limit=400)[0]
+    return val
+
+
+@pytest.mark.parametrize("m", [0.001, 0.0047, 0.05, 0.3, 2.0])
+def test_lobe_solid_angle_equals_adaptive_quadrature(m):
+    # the normalization table's own grid (incidence from grazing to 13 lobe widths inside it), plus
+    # normal incidence, grazing and just either side of it: the fixed rules within 1e-11 (measured
+    # 5e-13 at worst), where the table itself promises 1e-6
+    theta = np.pi / 2 - np.linspace(0.0, min(13.0, (np.pi / 2) / m), 41) * m
+    theta = np.concatenate([theta, [0.0, 1e-9, 0.3, np.pi / 2 - 1e-9, np.pi / 2, np.pi / 2 + 0.5 * m]])
+    expected = np.array([solid_angle_by_adaptive_quadrature(m, t) for t in theta])
+    np.testing.assert_allclose(lobe_solid_angle(m, theta), expected, rtol=1e-11)
+    assert lobe_solid_angle(m, 0.3) == pytest.approx(expected[-4], rel=1e-11)  # a scalar in, a scalar out
 
 
 @pytest.mark.parametrize("m", [0.002, 0.0047, 0.01, 0.05, 0.3])
