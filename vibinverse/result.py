@@ -3,19 +3,23 @@ netCDF file."""
 
 from __future__ import annotations
 
+import logging
 import math
 import re
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from vibinverse.errors import DataError
+from vibinverse.errors import DataError, Unsupported
 from vibinverse.io import jsonio
 from vibinverse.io.series import Series, check_file, netcdf_format
 from vibinverse.priors import Prior
+
+logger = logging.getLogger(__name__)
 
 #: approximations whose draws are of the posterior itself (resampled by importance weights), so that
 #: the summary's intervals are their quantiles (`vibinverse.estimators.importance`)
@@ -45,7 +49,8 @@ class FitResult:
     `approximation` what the intervals are without real draws ("laplace", "jackknife", "spectral");
     `units` (units, long name) per parameter; `pointwise` the pointwise log-likelihood and
     replicate series (chain, draw, sample) of a thinned subset of the draws, with the `draw`
-    indices kept (`vibinverse.estimators.base.pointwise`).
+    indices kept (`vibinverse.estimators.base.pointwise`), computed when first asked for
+    (`pointwise_groups`) from `pointwise_source`: a pipeline's earlier stages never need them.
     """
 
     method: str
@@ -69,6 +74,23 @@ class FitResult:
     approximation: str | None = None
     units: dict[str, tuple[str, str]] = field(default_factory=dict)
     pointwise: dict[str, np.ndarray] = field(default_factory=dict)
+    pointwise_source: Callable[[], dict[str, np.ndarray]] | None = field(default=None, repr=False, compare=False)
+
+    def pointwise_groups(self) -> dict[str, np.ndarray]:
+        """`pointwise`, computed from `pointwise_source` on the first call ({} when the model has no
+        pointwise form)."""
+        if self.pointwise_source is not None:
+            source, self.pointwise_source = self.pointwise_source, None
+            try:
+                self.pointwise = source()
+            except Unsupported as exc:
+                logger.debug("no log_likelihood or posterior_predictive group: %s", exc)
+        return self.pointwise
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled (to another process) with its pointwise groups computed, not their source."""
+        self.pointwise_groups()
+        return dict(self.__dict__)
 
     @property
     def draws(self) -> np.ndarray | None:
@@ -191,7 +213,7 @@ class FitResult:
             groups["sample_stats"] = xr.Dataset({"lp": (("chain", "draw"), np.asarray(self.log_prob))})
         n = series.time.size
         sample = {"time_index": np.arange(n)}
-        if self.pointwise:
+        if self.pointwise_groups():
             coords = {"chain": np.arange(self.pointwise["log_likelihood"].shape[0]), "draw": self.pointwise["draw"]}
             coords.update(sample)
             dims = ("chain", "draw", "time_index")

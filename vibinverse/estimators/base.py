@@ -13,6 +13,7 @@ import math
 import re
 import time
 from abc import ABC, abstractmethod
+from functools import partial
 from typing import Any, ClassVar
 
 import numpy as np
@@ -72,8 +73,9 @@ def base_result(posterior: Posterior, method: str, point: dict[str, float], **fi
 def complete(result: FitResult, posterior: Posterior) -> FitResult:
     """Add what every result carries: the truth, the data's description, the detection test of
     every line at the point estimate, the predictive band, the parameters' units, the residual
-    checks at the point estimate, and the pointwise log-likelihood and replicate series of a subset
-    of the draws (ArviZ's log_likelihood and posterior_predictive groups)."""
+    checks at the point estimate, and (computed when first asked for) the pointwise log-likelihood
+    and replicate series of a subset of the draws (ArviZ's log_likelihood and posterior_predictive
+    groups)."""
     series = posterior.series
     model = posterior.model
     data = {
@@ -109,10 +111,7 @@ def complete(result: FitResult, posterior: Posterior) -> FitResult:
         else (None if result.approximate_draws is None else result.approximate_draws[None])
     )
     if chains is not None and chains.size:
-        try:
-            result.pointwise = pointwise(posterior, chains)
-        except Unsupported as exc:
-            logger.debug("no log_likelihood or posterior_predictive group: %s", exc)
+        result.pointwise, result.pointwise_source = {}, partial(pointwise, posterior, chains)
     return result
 
 

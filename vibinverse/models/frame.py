@@ -117,7 +117,7 @@ class FrameModel(SignalModel):
     name = "frame"
     releases_gil = True  # numba nogil kernels, and `components` allocates per call (no shared scratch)
     map_start_margin = 50.0  # a swapped drive/resonance assignment starts far below the best
-    casadi_bytes_per_sample = 25e3  # unexpanded MX graph and IPOPT: 12 kB a sample measured (4000 samples)
+    casadi_bytes_per_sample = 25e3  # MX graph over SX blocks and IPOPT: 9-21 kB a sample measured (12000, 4000)
 
     @classmethod
     def describes(cls, table: dict) -> bool:
