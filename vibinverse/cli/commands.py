@@ -432,7 +432,7 @@ def _bench_estimators(quick: bool) -> tuple[dict, Any]:
     from vibinverse.bench.estimators_bench import plot_speed_error, run
 
     sizes = {"n_seeds": 5, "n_coverage": 20, "mcmc_seeds": 4} if quick else {}
-    result = run(builtin_scene(""), **sizes)
+    result = run(builtin_scene(""), workers=min(2, os.cpu_count() or 1), **sizes)
     for scene in dict.fromkeys(r["scene"] for r in result["rows"]):
         logger.info(f"{scene}:")
         logger.info(_estimator_table([r for r in result["rows"] if r["scene"] == scene]))
