@@ -28,6 +28,23 @@ def test_casadi_objective_equals_the_numpy_posterior_and_its_map_agrees():
         assert a["sd"] == pytest.approx(b["sd"], rel=0.1)  # exact vs finite-difference Hessian
 
 
+@pytest.mark.parametrize("duration", ["0.1", "4.03"])
+def test_a_record_of_part_blocks_is_padded_with_gaps_that_change_nothing(duration):
+    """The casadi recursion runs KALMAN_BLOCK steps a call: 20 samples (fewer than a block, one short
+    block) and 806 (16 blocks and 6 steps, the last block padded with 44 gaps) give the numpy
+    posterior to 1e-10, with gaps of their own."""
+    from vibinverse.models.frame_casadi import KALMAN_BLOCK, CasadiFrameObjective
+
+    prob = frame_problem(SNR10, f"sampling.duration={duration}", gaps=0.05)
+    assert prob.series.time.size % KALMAN_BLOCK != 0
+    obj = CasadiFrameObjective(prob)
+    z0 = prob.space.to_z(prob.truth())
+    rng = np.random.default_rng(2)
+    for dz in (0.0, 0.1):
+        z = z0 + dz * rng.normal(size=z0.size)
+        assert obj(z) == pytest.approx(-prob.log_posterior(z), rel=1e-10)
+
+
 def test_casadi_objective_on_irregular_stamps_equals_the_numpy_posterior():
     """Jittered stamps with dropped frames and gaps: the casadi objective maps the closed-form
     discretization over the distinct steps and gives each Kalman step its own (Phi, Q); it equals
