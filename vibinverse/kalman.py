@@ -4,8 +4,9 @@
 
 O(T n^3) for n states, scalar observations; a NaN observation is a gap: the update is skipped, and
 the likelihood is that of the observed samples only. The filter is the hot loop of every fit, so it
-runs as a compiled numba kernel (`filter_steps`); `log_likelihood_reference` is the same recursion
-in numpy, for tests. Once the Riccati recursion has converged (to ~1e-14, over one period of the
+runs as a compiled numba kernel (`filter_steps`; `filter_two_states` for the common n = 2, one
+oscillator, in scalars, ~5x faster); `log_likelihood_reference` is the same recursion in numpy,
+for tests. Once the Riccati recursion has converged (to ~1e-14, over one period of the
 slowest oscillation: `hold_samples`), the gain is held until a gap or another step, and a step
 costs O(n): a one-hour record at 200 Hz takes ~0.02 s instead of ~0.15 s.
 
@@ -53,8 +54,7 @@ def log_likelihood(
 ) -> float:
     """log p(y) for the model above; y may contain NaN gaps."""
     phis, qs = np.asarray(phi, dtype=np.float64)[None], np.asarray(q, dtype=np.float64)[None]
-    args = _step_args(y, phis, qs, _UNIFORM, h, r, p0)
-    return float(filter_steps(*args, np.empty(0), np.empty(0), hold_samples(phis)))
+    return run_filter(y, phis, qs, _UNIFORM, h, r, p0, np.empty(0), np.empty(0))
 
 
 def whiten(y, phi, q, h, r, p0) -> NDArray[np.float64]:
@@ -62,7 +62,7 @@ def whiten(y, phi, q, h, r, p0) -> NDArray[np.float64]:
     e.e = y^T Sigma^-1 y, which gives the Fisher information of the mean: sum of e(d mu_i) e(d mu_j)."""
     phis, qs = np.asarray(phi, dtype=np.float64)[None], np.asarray(q, dtype=np.float64)[None]
     out = np.empty(len(y))
-    filter_steps(*_step_args(y, phis, qs, _UNIFORM, h, r, p0), out, np.empty(0), hold_samples(phis))
+    run_filter(y, phis, qs, _UNIFORM, h, r, p0, out, np.empty(0))
     return out
 
 
@@ -75,11 +75,29 @@ def hold_samples(phis: NDArray[np.float64]) -> int:
     `phis` (a lightly damped oscillator's Riccati recursion converges with an oscillation whose
     changes dip towards 0 twice a period long before it has converged), plus one; 2 when no
     eigenvalue oscillates (walks and Ornstein-Uhlenbeck states converge monotonically)."""
-    angles = np.abs(np.angle(np.linalg.eigvals(np.asarray(phis, dtype=np.float64))))
+    phis = np.asarray(phis, dtype=np.float64)
+    angles = _two_state_angles(phis) if phis.shape[1:] == (2, 2) and phis.shape[0] <= 8 else None
+    if angles is None:
+        angles = np.abs(np.angle(np.linalg.eigvals(phis)))
     turning = angles[angles > 1e-12]
     if turning.size == 0:
         return 2
     return int(min(2**62, math.ceil(2.0 * math.pi / float(turning.min())) + 1))
+
+
+def _two_state_angles(phis: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """|arg| of the eigenvalues of 2 x 2 tables in closed form (tr / 2 +- i sqrt(det - tr^2 / 4)),
+    in scalars: ~20x cheaper than `np.linalg.eigvals` for the one table of a uniform grid (a
+    likelihood call pays it). None unless every table clearly has a complex pair (real or nearly
+    coincident eigenvalues go to `eigvals`)."""
+    out = np.empty(phis.shape[0])
+    for u, ((a, b), (c, d)) in enumerate(phis.tolist()):
+        half, det = 0.5 * (a + d), a * d - b * c
+        gap = det - half * half
+        if not gap > 1e-6 * half * half:
+            return None
+        out[u] = math.atan2(math.sqrt(gap), half)
+    return out
 
 
 def log_likelihood_reference(y, phi, q, h, r, p0) -> float:
@@ -297,6 +315,135 @@ def filter_steps(
     return ll
 
 
+@njit(cache=True, fastmath=False, nogil=True)
+def filter_two_states(
+    y, phis, qs, idx, h, r, p0, white, lls, freeze
+):  # pragma: no cover - compiled; checked against `filter_steps` and the reference
+    """`filter_steps` for n = 2 states (one oscillator: the frame's tilt, a single resonance), the
+    same recursion, gaps, outputs and gain hold, with the state and the covariance's three
+    distinct entries in scalars: 2-3x faster than the general loops, whose tiny inner loops keep
+    x and P in memory (measured 36 against 90-110 ns a sample, 4000 samples)."""
+    uniform = idx.shape[0] == 0
+    h0, h1 = h[0], h[1]
+    x0 = x1 = 0.0
+    p00, p01, p11 = p0[0, 0], 0.5 * (p0[0, 1] + p0[1, 0]), p0[1, 1]
+    f00 = f01 = f11 = 0.0  # the covariance at the hold
+    g0 = g1 = 0.0  # the held gain
+    pg0 = pg1 = 0.0  # the previous sample's gain
+    prev_s = 0.0
+    have_prev = False
+    prev_u = -1
+    last_delta = np.inf
+    frozen = False
+    calm = 0
+    fu = -1
+    log_norm, inv_sf, inv_root = 0.0, 1.0, 1.0
+    ll = 0.0
+    u = 0
+    a00, a01, a10, a11 = phis[0, 0, 0], phis[0, 0, 1], phis[0, 1, 0], phis[0, 1, 1]
+    q00, q01, q11 = qs[0, 0, 0], 0.5 * (qs[0, 0, 1] + qs[0, 1, 0]), qs[0, 1, 1]
+    loaded = 0
+    for k in range(y.shape[0]):
+        yk = y[k]
+        observed = yk == yk  # NaN: a gap
+        if k > 0:
+            if not uniform:
+                u = idx[k]
+                if u != loaded:
+                    a00, a01, a10, a11 = phis[u, 0, 0], phis[u, 0, 1], phis[u, 1, 0], phis[u, 1, 1]
+                    q00, q01, q11 = qs[u, 0, 0], 0.5 * (qs[u, 0, 1] + qs[u, 1, 0]), qs[u, 1, 1]
+                    loaded = u
+            t0 = a00 * x0 + a01 * x1
+            x1 = a10 * x0 + a11 * x1
+            x0 = t0
+            if frozen and (u != fu or not observed):  # the held gain no longer applies
+                frozen = False
+                p00, p01, p11 = f00, f01, f11
+                have_prev = False
+                last_delta = np.inf
+            if frozen:
+                v = yk - h0 * x0 - h1 * x1
+                x0 += g0 * v
+                x1 += g1 * v
+                lk = log_norm - 0.5 * v * v * inv_sf
+                ll += lk
+                if lls.shape[0]:
+                    lls[k] = lk
+                if white.shape[0]:
+                    white[k] = v * inv_root
+                continue
+            m00 = a00 * p00 + a01 * p01
+            m01 = a00 * p01 + a01 * p11
+            m10 = a10 * p00 + a11 * p01
+            m11 = a10 * p01 + a11 * p11
+            n00 = m00 * a00 + m01 * a01 + q00
+            n01 = 0.5 * ((m00 * a10 + m01 * a11) + (m10 * a00 + m11 * a01)) + q01
+            n11 = m10 * a10 + m11 * a11 + q11
+            p00, p01, p11 = n00, n01, n11
+        if not observed:
+            have_prev = False
+            if white.shape[0]:
+                white[k] = np.nan
+            if lls.shape[0]:
+                lls[k] = np.nan
+            continue
+        ph0 = p00 * h0 + p01 * h1
+        ph1 = p01 * h0 + p11 * h1
+        s = r + h0 * ph0 + h1 * ph1
+        v = yk - h0 * x0 - h1 * x1
+        if not s > 0.0:
+            if lls.shape[0]:
+                lls[k:] = -np.inf
+            return -np.inf
+        k0, k1 = ph0 / s, ph1 / s
+        x0 += ph0 * v / s
+        x1 += ph1 * v / s
+        p00 -= ph0 * ph0 / s
+        p01 -= ph0 * ph1 / s
+        p11 -= ph1 * ph1 / s
+        lk = -0.5 * (math.log(s) + _LOG_2PI + v * v / s)
+        ll += lk
+        if lls.shape[0]:
+            lls[k] = lk
+        if white.shape[0]:
+            white[k] = v / math.sqrt(s)
+        if freeze:
+            if have_prev and u == prev_u:
+                scale = max(abs(k0), abs(k1))  # `gain_change`
+                delta = abs(s - prev_s) / s
+                d0, d1 = abs(k0 - pg0), abs(k1 - pg1)
+                if d0 > 0.0:
+                    delta = max(delta, d0 / scale)
+                if d1 > 0.0:
+                    delta = max(delta, d1 / scale)
+                calm = calm + 1 if is_calm(delta, last_delta) else 0
+                if calm >= freeze:
+                    calm = 0
+                    frozen = True
+                    fu = u
+                    log_norm = -0.5 * (math.log(s) + _LOG_2PI)
+                    inv_sf = 1.0 / s
+                    inv_root = 1.0 / math.sqrt(s)
+                    g0, g1 = k0, k1
+                    f00, f01, f11 = p00, p01, p11
+                last_delta = delta
+            else:
+                calm = 0
+            pg0, pg1 = k0, k1
+            prev_s = s
+            prev_u = u
+            have_prev = True
+    return ll
+
+
+def run_filter(y, phis, qs, idx, h, r, p0, white, lls) -> float:
+    """The filter for step tables (phis, qs) and step index idx (empty: uniform), the gain held
+    after `hold_samples`: the two-state kernel for one oscillator, `filter_steps` otherwise."""
+    args = _step_args(y, phis, qs, idx, h, r, p0)
+    kernel = filter_two_states if args[1].shape[1] == 2 else filter_steps
+    return float(kernel(*args, white, lls, hold_samples(args[1])))
+
+
 def _step_args(y, phis, qs, idx, h, r, p0):
     c = lambda a: np.ascontiguousarray(a, dtype=np.float64)
     return c(y), c(phis), c(qs), np.ascontiguousarray(idx, dtype=np.int64), c(h), float(r), c(p0)
@@ -305,21 +452,21 @@ def _step_args(y, phis, qs, idx, h, r, p0):
 def log_likelihood_steps(y, phis, qs, idx, h, r, p0) -> float:
     """log p(y) when step k (from sample k - 1 to k) has (Phi, Q) = (phis[idx[k]], qs[idx[k]]);
     idx[0] is not read. y may contain NaN gaps."""
-    return float(filter_steps(*_step_args(y, phis, qs, idx, h, r, p0), np.empty(0), np.empty(0), hold_samples(phis)))
+    return run_filter(y, phis, qs, idx, h, r, p0, np.empty(0), np.empty(0))
 
 
 def pointwise_log_likelihood(y, phis, qs, idx, h, r, p0) -> NDArray[np.float64]:
     """Each sample's one-step predictive log density log p(y_k | y_1..y_{k-1}) (NaN at gaps; its
     nansum is `log_likelihood_steps`). A uniform grid: phis = phi[None], qs = q[None], idx zeros."""
     out = np.empty(len(y))
-    filter_steps(*_step_args(y, phis, qs, idx, h, r, p0), np.empty(0), out, hold_samples(phis))
+    run_filter(y, phis, qs, idx, h, r, p0, np.empty(0), out)
     return out
 
 
 def whiten_steps(y, phis, qs, idx, h, r, p0) -> NDArray[np.float64]:
     """`whiten` with per-step (Phi, Q) as in `log_likelihood_steps`."""
     out = np.empty(len(y))
-    filter_steps(*_step_args(y, phis, qs, idx, h, r, p0), out, np.empty(0), hold_samples(phis))
+    run_filter(y, phis, qs, idx, h, r, p0, out, np.empty(0))
     return out
 
 

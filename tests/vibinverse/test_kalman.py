@@ -13,6 +13,7 @@ from tests.conftest import held_reference
 from vibinverse.kalman import (
     discretize_continuous,
     filter_steps,
+    filter_two_states,
     held_oscillator_fill,
     held_stationary,
     hold_samples,
@@ -347,3 +348,71 @@ def test_the_held_likelihood_is_the_full_recursion_for_all_oscillators(f, zeta, 
     full = filter_steps(y, phis, qs, idx, h, r, p0, empty, empty, 0)
     held = filter_steps(y, phis, qs, idx, h, r, p0, empty, empty, hold_samples(phis))
     assert held == pytest.approx(full, rel=1e-9, abs=1e-9)
+
+
+# ------------------------------------------------------------------ the two-state kernel
+@settings(max_examples=40, deadline=None)
+@given(
+    f=st.floats(0.05, 99.0),  # one cycle per 20 s record .. just below Nyquist (100 Hz)
+    zeta=st.sampled_from([1e-4, 0.0138, 0.3, 0.999, 1.0, 1.5]),
+    sigma=st.floats(1e-3, 10.0),
+    gap=st.integers(0, 3_500),
+    irregular=st.booleans(),
+    h1=st.sampled_from([0.0, 0.02]),
+)
+def test_the_two_state_kernel_is_the_general_filter_for_all_oscillators(f, zeta, sigma, gap, irregular, h1):
+    """`filter_two_states` (one oscillator, scalars) against `filter_steps` (any n): the same
+    log-likelihood (1e-12 relative: the same recursion, rounded in another order), innovations and
+    pointwise densities (1e-9), with and without the held gain, on a uniform grid and on jittered
+    stamps with dropped frames, with a run of 200 missing samples."""
+    n = 4_000
+    rng = np.random.default_rng(7)
+    if irregular:
+        frames = np.cumsum(np.where(rng.random(n) < 0.1, 2, 1))
+        steps, idx = unique_steps(np.round((frames + rng.uniform(-0.2, 0.2, n)) * 20) / 20 * 0.005)
+    else:
+        steps, idx = np.array([0.005]), np.zeros(0, dtype=np.int64)
+    w = 2 * np.pi * f
+    phis, qs = oscillator_tables(w, zeta, steps)
+    p0 = oscillator_stationary(w, zeta)
+    h = np.array([1.0, h1 / w])
+    r = sigma**2 * float(p0[0, 0])
+    y = simulate(phis, qs, idx if irregular else np.zeros(n, dtype=np.int64), h, r, p0, rng)
+    y[gap : gap + 200] = np.nan
+    for freeze in (0, hold_samples(phis)):
+        outs = []
+        for kernel in (filter_steps, filter_two_states):
+            white, lls = np.empty(n), np.empty(n)
+            ll = kernel(y, phis, qs, idx, h, r, p0, white, lls, freeze)
+            outs.append((ll, white, lls))
+        (ll_g, white_g, lls_g), (ll_2, white_2, lls_2) = outs
+        assert ll_2 == pytest.approx(ll_g, rel=1e-12)
+        np.testing.assert_allclose(white_2, white_g, rtol=0, atol=1e-9, equal_nan=True)
+        np.testing.assert_allclose(lls_2, lls_g, rtol=0, atol=1e-9, equal_nan=True)
+
+
+def test_the_likelihood_of_one_oscillator_takes_the_two_state_kernel():
+    """`log_likelihood` and the per-step forms of a two-state model equal the numpy reference (the
+    dispatch to `filter_two_states`), and an undefined innovation variance gives -inf."""
+    phis, qs, h, r, p0 = _oscillator()
+    y = simulate(phis, qs, np.zeros(600, dtype=np.int64), h, r, p0, np.random.default_rng(8))
+    y[[5, 300, 301]] = np.nan
+    ref = log_likelihood_reference(y, phis[0], qs[0], h, r, p0)
+    assert log_likelihood(y, phis[0], qs[0], h, r, p0) == pytest.approx(ref, rel=1e-12)
+    idx = np.zeros(y.size, dtype=np.int64)
+    assert np.nansum(pointwise_log_likelihood(y, phis, qs, idx, h, r, p0)) == pytest.approx(ref, rel=1e-12)
+    assert log_likelihood(y, phis[0], qs[0], h, 0.0, np.zeros((2, 2))) == -np.inf
+
+
+@settings(max_examples=60, deadline=None)
+@given(f=st.floats(1e-4, 99.9), zeta=st.floats(0.0, 0.99), dt=st.sampled_from([0.001, 0.005, 0.05]))
+def test_the_hold_of_one_oscillator_is_the_eigenvalue_period(f, zeta, dt):
+    """`hold_samples` of a 2 x 2 table in closed form: one period of the eigenvalues' rotation
+    from `np.linalg.eigvals`, plus one (or 2 when they do not turn), for any damped oscillator
+    below Nyquist."""
+    w = 2 * np.pi * min(f, 0.499 / dt)
+    phis, _ = oscillator_tables(w, zeta, np.array([dt]))
+    angles = np.abs(np.angle(np.linalg.eigvals(phis)))
+    turning = angles[angles > 1e-12]
+    expect = 2 if turning.size == 0 else int(min(2**62, np.ceil(2 * np.pi / turning.min()) + 1))
+    assert abs(hold_samples(phis) - expect) <= max(1, 1e-9 * expect)
