@@ -514,9 +514,7 @@ class SlowReading:
 def _shaped_gain(spec: ModalSpec, series: Series, shape: np.ndarray) -> ModalModel:
     """The modal model of `spec` (gain = 1) whose one gain basis function is `shape`: with
     `gain.a1` = 1 its multiplier is 1 + shape (`ModalModel.multiplier`)."""
-    model = ModalModel({"modal": spec.table()}, series)
-    model.gain_basis = np.ascontiguousarray(shape[None, :])
-    return model
+    return ModalModel({"modal": spec.table()}, series, gain_shapes=shape[None, :])
 
 
 def slow_reading(fit: OrderFit, series: Series, j: int, replicates: int = REPLICATES, seed: int = 0) -> SlowReading:

@@ -661,7 +661,9 @@ class ModalModel(SignalModel):
         """The true values of a simulated series: its `modal.values` as a nested table."""
         return _nest(dict((table.get("modal") or {}).get("values") or {}))
 
-    def __init__(self, table: dict, series: Series):
+    def __init__(self, table: dict, series: Series, gain_shapes: np.ndarray | None = None):
+        """`gain_shapes` (gain terms x samples): the gain drift's basis functions in place of the
+        default cosines (`gain_basis`), e.g. one given curve (`model_order.slow_reading`)."""
         self.base = copy.deepcopy(dict(table))
         self.base.setdefault("modal", {})
         self.spec = ModalSpec.from_table(self.base)
@@ -681,6 +683,13 @@ class ModalModel(SignalModel):
             self.steps = np.ascontiguousarray(self.steps, dtype=float)
         self._names = self.spec.names()
         self._layout()
+        if gain_shapes is not None:
+            shapes = np.asarray(gain_shapes, dtype=float)
+            if shapes.shape != self.gain_basis.shape:
+                raise SceneError(
+                    f"gain_shapes: shape {shapes.shape}; allowed: (modal.gain, samples) = {self.gain_basis.shape}"
+                )
+            self.gain_basis = np.ascontiguousarray(shapes)
         self._fixed_values = {k: float(v) for k, v in (self.base["modal"].get("values") or {}).items()}
         self._start = {k: float(v) for k, v in (self.base["modal"].get("start") or {}).items()}
         self._base_values: dict[str, float] | None = None

@@ -10,6 +10,7 @@ import pytest
 from scipy.linalg import expm
 
 import vibinverse as vi
+from vibinverse.errors import SceneError
 from vibinverse.kalman import log_likelihood_steps_reference
 from vibinverse.models import MODELS, model_class_for
 from vibinverse.models.modal import ModalModel, ModalSpec, _block_filter, _fill_tables, _oscillator
@@ -215,6 +216,13 @@ def test_gain_drift_likelihood_is_the_dense_gaussian(jitter):
     assert (
         m.log_likelihood({**values, "gain.a1": 0.5, "gain.a2": -0.5, "gain.a3": 0.5}) == -math.inf
     )  # 1 + g = -0.5 at the end
+    # the same g given as one curve (`gain_shapes`), a1 = 1: the same likelihood; a wrong shape refused
+    spec1 = {"modal": {"modes": 1, "lines": 1, "noise": "ar1", "gain": 1}}
+    shaped = ModalModel(spec1, s, gain_shapes=g[None, :])
+    one = {**{k: v for k, v in values.items() if not k.startswith("gain.")}, "gain.a1": 1.0}
+    assert shaped.log_likelihood(one) == pytest.approx(ref, rel=1e-9)
+    with pytest.raises(SceneError, match=r"gain_shapes: shape \(2, 160\)"):
+        ModalModel(spec1, s, gain_shapes=np.vstack([g, g]))
 
 
 def test_gain_drift_replicates_have_the_modulated_variance():
