@@ -68,7 +68,7 @@ import numpy as np
 
 from vibinverse.errors import SceneError
 from vibinverse.io.series import MIN_CYCLES, Series, evenly_spaced
-from vibinverse.kalman import gain_change, held_update, is_calm, njit, unique_steps
+from vibinverse.kalman import filter_two_states, gain_change, held_update, is_calm, njit, unique_steps
 from vibinverse.models.base import (
     LineTest,
     SignalModel,
@@ -817,6 +817,9 @@ class ModalModel(SignalModel):
         hm = self._scratch()[5]  # filled by `tables`
         if hm.size and not hm.min() > 0.0:
             return -math.inf
+        if self._nstate == 2 and not hm.size:  # one mode and white noise: the scalar kernel, ~5x faster
+            hold = self.hold(values) if freeze else 0
+            return float(filter_two_states(self.y - mean, phis, qs, self.idx, self.h, r, p0, white, lls, hold))
         return float(
             _block_filter(
                 self.y - mean,

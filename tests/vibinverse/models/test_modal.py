@@ -378,3 +378,40 @@ def test_the_final_fit_starts_inside_the_phase_window_the_order_search_left():
     f = result.summary()["parameters"]["lines[0].frequency"]
     assert f["map"] == pytest.approx(10.0, abs=1e-2)
     assert [d.detected for d in result.detections if "line" in d.what] == [True]
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.2])
+def test_one_mode_and_white_noise_take_the_two_state_kernel_and_keep_the_numbers(jitter):
+    """Two states (one mode; or a random walk and an AR(1) state) take `kalman.filter_two_states`:
+    one mode and a line in white noise equal the dense Gaussian (1e-9 relative), and both models
+    equal the plain numpy filter of their own tables, on a uniform grid and on jittered stamps
+    with gaps; the pointwise densities sum to the likelihood."""
+    from scipy.stats import multivariate_normal
+
+    s = series_of(n=400, gaps=0.05, jitter=jitter)
+    t, y = s.time, s.intensity
+    m = ModalModel({"modal": {"modes": 1, "lines": 1}}, s)
+    values = {
+        "level": 2.0,
+        "modes[0].frequency": 1.3,
+        "modes[0].damping_ratio": 0.04,
+        "modes[0].rms": 0.6,
+        "lines[0].frequency": 2.1,
+        "lines[0].amplitude": 0.5,
+        "lines[0].phase": 0.3,
+        "noise.sigma": 0.9,
+    }
+    mean = 2.0 + 0.5 * np.cos(2 * np.pi * 2.1 * t + 0.3)
+    cov = sho_covariance(t, 1.3, 0.04, 0.6) + 0.81 * np.eye(t.size)
+    ok = np.isfinite(y)
+    dense = multivariate_normal(mean[ok], cov[np.ix_(ok, ok)]).logpdf(y[ok])
+    assert m.log_likelihood(values) == pytest.approx(dense, rel=1e-9)
+    walk = ModalModel({"modal": {"modes": 0, "lines": 1, "drift": True, "noise": "ar1"}}, s)
+    walk_values = {k: v for k, v in values.items() if not k.startswith("modes")}
+    walk_values.update({"drift.rate": 0.05, "ar.rms": 0.3, "ar.time": 0.4})
+    for model, v in ((m, values), (walk, walk_values)):
+        mu, phis, qs, r, p0 = model.tables(v)
+        assert phis.shape[1:] == (2, 2)
+        ref = log_likelihood_steps_reference(y - mu, phis, qs, model.idx, model.h, r, p0)
+        assert model.log_likelihood(v) == pytest.approx(ref, rel=1e-10)
+        assert np.nansum(model.pointwise_log_likelihood(v)) == pytest.approx(ref, rel=1e-10)
