@@ -163,6 +163,17 @@ def test_held_gain_saves_work_and_keeps_the_numbers():
     assert held == pytest.approx(full, rel=1e-12)
 
 
+MODE_AND_LINE = {  # one mode at 1.3 Hz and a line at 2.1 Hz over a level of 2
+    "level": 2.0,
+    "modes[0].frequency": 1.3,
+    "modes[0].damping_ratio": 0.04,
+    "modes[0].rms": 0.6,
+    "lines[0].frequency": 2.1,
+    "lines[0].amplitude": 0.5,
+    "lines[0].phase": 0.3,
+}
+
+
 def sho_covariance(t: np.ndarray, f: float, zeta: float, rms: float) -> np.ndarray:
     """The stationary autocovariance of q'' + 2 zeta w q' + w^2 q = white noise, variance rms^2:
     rms^2 e^{-zeta w |tau|} (cos w_d tau + zeta w / w_d sin w_d |tau|) (closed form, not the model's)."""
@@ -183,13 +194,7 @@ def test_gain_drift_likelihood_is_the_dense_gaussian(jitter):
     s = series_of(n=160, gaps=0.05, jitter=jitter)
     m = ModalModel({"modal": {"modes": 1, "lines": 1, "noise": "ar1", "gain": 3}}, s)
     values = {
-        "level": 2.0,
-        "modes[0].frequency": 1.3,
-        "modes[0].damping_ratio": 0.04,
-        "modes[0].rms": 0.6,
-        "lines[0].frequency": 2.1,
-        "lines[0].amplitude": 0.5,
-        "lines[0].phase": 0.3,
+        **MODE_AND_LINE,
         "ar.rms": 0.3,
         "ar.time": 0.4,
         "gain.a1": 0.2,
@@ -392,13 +397,7 @@ def test_one_mode_and_white_noise_take_the_two_state_kernel_and_keep_the_numbers
     t, y = s.time, s.intensity
     m = ModalModel({"modal": {"modes": 1, "lines": 1}}, s)
     values = {
-        "level": 2.0,
-        "modes[0].frequency": 1.3,
-        "modes[0].damping_ratio": 0.04,
-        "modes[0].rms": 0.6,
-        "lines[0].frequency": 2.1,
-        "lines[0].amplitude": 0.5,
-        "lines[0].phase": 0.3,
+        **MODE_AND_LINE,
         "noise.sigma": 0.9,
     }
     mean = 2.0 + 0.5 * np.cos(2 * np.pi * 2.1 * t + 0.3)
