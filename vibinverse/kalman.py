@@ -87,7 +87,7 @@ def hold_samples(phis: NDArray[np.float64]) -> int:
 
 def _two_state_angles(phis: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """|arg| of the eigenvalues of 2 x 2 tables in closed form (tr / 2 +- i sqrt(det - tr^2 / 4)),
-    in scalars: ~20x cheaper than `np.linalg.eigvals` for the one table of a uniform grid (a
+    in scalars: 8 against 40-58 us for `np.linalg.eigvals` on the one table of a uniform grid (a
     likelihood call pays it). None unless every table clearly has a complex pair (real or nearly
     coincident eigenvalues go to `eigvals`)."""
     out = np.empty(phis.shape[0])
