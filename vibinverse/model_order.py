@@ -55,7 +55,7 @@ penalty per added line or mode (3 parameters: frequency, amplitude or damping, p
 1.5 ln n in log-likelihood, is 12.4 at n = 4000: the 5-sigma gain (12.5) the detection test
 (`vibinverse.detection`) asks of a line at a known frequency. A gain drift (6 cosines) costs
 3 ln n: it enters when the vibration's amplitude visibly follows the level. A drift costs 0.5 ln n, AR(1) noise
-ln n, 1/f noise 0.5 ln n.
+ln n, 1/f noise (its level and upper corner) ln n.
 
 Each mode and line also pays the look-elsewhere term 2 ln M, M = (Nyquist - 1 / span) x span the
 independent frequencies its frequency was searched over (the term the detection test adds to its
@@ -83,6 +83,7 @@ from scipy.optimize import minimize
 from vibinverse.errors import NumericalError
 from vibinverse.io.series import FEW_CYCLES, MIN_CYCLES, Series
 from vibinverse.models.modal import (
+    FLICKER_LOWEST_CORNER,
     GAIN_TERMS,
     ModalModel,
     ModalSpec,
@@ -320,10 +321,16 @@ def candidates(
         ]
         out.append(Candidate("AR(1) noise", replace(spec, noise="ar1"), grid, ["ar.rms", "ar.time"]))
         grid = [
-            {**values, "flicker.rms": c * sigma, "noise.sigma": sigma * math.sqrt(max(1 - c * c, 0.05))}
+            {
+                **values,
+                "flicker.rms": c * sigma,
+                "flicker.corner": max(corner * nyq, FLICKER_LOWEST_CORNER / span),
+                "noise.sigma": sigma * math.sqrt(max(1 - c * c, 0.05)),
+            }
+            for corner in (1.0, 0.2, 0.04)
             for c in (0.1, 0.3, 0.9)
         ]
-        out.append(Candidate("1/f noise", replace(spec, noise="1/f"), grid, ["flicker.rms"]))
+        out.append(Candidate("1/f noise", replace(spec, noise="1/f"), grid, ["flicker.rms", "flicker.corner"]))
     if search["gain"] and not spec.gain:
         out.append(gain_candidate(model, values, spec))
     return out
@@ -397,7 +404,14 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
     sigma = values["noise.sigma"]
     span = max(fit.model.span, series.dt)
     out: list[Candidate] = []
-    nuisance = ["drift.rate", "ar.rms", "ar.time", "flicker.rms", *gain_names(max(GAIN_TERMS, spec.gain))]
+    nuisance = [
+        "drift.rate",
+        "ar.rms",
+        "ar.time",
+        "flicker.rms",
+        "flicker.corner",
+        *gain_names(max(GAIN_TERMS, spec.gain)),
+    ]
 
     def move(what: str, new_spec: ModalSpec, starts: list[dict[str, float]]) -> Candidate:
         names = set(new_spec.names())
@@ -459,7 +473,10 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
         out.append(move(f"remove the {spec.noise} noise", replace(spec, noise="white"), [dict(values)]))
         other = "1/f" if spec.noise == "ar1" else "ar1"
         starts = (
-            [{**values, "flicker.rms": values.get("ar.rms", sigma)}]
+            [
+                {**values, "flicker.rms": values.get("ar.rms", sigma), "flicker.corner": corner}
+                for corner in (0.5 / series.dt, 1.0 / (2.0 * math.pi * values.get("ar.time", series.dt)))
+            ]
             if other == "1/f"
             else [
                 {**values, "ar.rms": values.get("flicker.rms", sigma), "ar.time": tau * series.dt}

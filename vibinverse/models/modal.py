@@ -12,10 +12,14 @@ and nuisance terms, all in one Kalman filter (`ModalModel`, registered as "modal
   "integrated": a slope state driven by white noise of intensity rate^2, level and slope started
   at 0; `drift.rate` is then in intensity per s^1.5).
 - c: coloured noise. "ar1": one Ornstein-Uhlenbeck state (`ar.rms`, its stationary RMS, and
-  `ar.time`, the correlation time in s; sampled, an AR(1) with phi = exp(-dt / time)). "1/f": three
-  Ornstein-Uhlenbeck states with correlation times span / 2 pi x (1, 1/10, 1/100) (corners at 1,
-  10 and 100 cycles per record), each of variance `flicker.rms`^2 / 3: a spectrum ~ 1/f between
-  the corners.
+  `ar.time`, the correlation time in s; sampled, an AR(1) with phi = exp(-dt / time)). "1/f": Ornstein-
+  Uhlenbeck states of equal variance `flicker.rms`^2 / their number, one for each decade from one
+  cycle per record to the Nyquist frequency (at least three; `flicker_terms`: four on 20 s at
+  200 Hz), their corners spread evenly in log frequency from one cycle per record to
+  `flicker.corner` (Hz; `flicker_times`): a spectrum ~ 1/f between those, ~ 1/f^2 above. A 1/f
+  term whose upper corner was fixed at 100 cycles per record (5 Hz on 20 s) left the shoulder of
+  noise with a 16 Hz corner to a false broad "mode"; one fixed at Nyquist under-predicted the noise
+  near a 3.5 Hz mode of such data, which widened (damping ratios 2x too large).
 - e: white sensor noise (`noise.sigma`).
 - g: a multiplicative gain drift (a cloud dims the whole signal, the vibration included; `gain`
   J > 0 cosines, `gain.a1` .. `gain.aJ`): g(t) = sum_j a_j cos(pi j u), u = (t - t0) / span, from
@@ -81,7 +85,8 @@ from vibinverse.priors import Prior
 
 NOISE_KINDS = ("white", "ar1", "1/f")
 DRIFT_KINDS = ("none", "walk", "integrated")
-FLICKER_DECADES = (1.0, 0.1, 0.01)  # correlation times, x span / (2 pi)
+FLICKER_MIN_TERMS = 3  # the 1/f term's fewest Ornstein-Uhlenbeck states (`flicker_terms`)
+FLICKER_LOWEST_CORNER = 10.0  # cycles per record: the 1/f term's upper corner's prior starts here
 GAIN_TERMS = 6  # the gain drift's cosines: 0.5 to 3 cycles per record
 GAIN_LIMIT = 0.5  # each coefficient's prior: uniform (-limit, limit)
 
@@ -163,17 +168,24 @@ class ModalSpec:
         if self.noise == "ar1":
             out += ["ar.rms", "ar.time"]
         elif self.noise == "1/f":
-            out.append("flicker.rms")
+            out += ["flicker.rms", "flicker.corner"]
         out += gain_names(self.gain)
         out.append("noise.sigma")
         return out
 
-    def n_states(self) -> int:
-        return (
-            2 * self.modes
-            + {"none": 0, "walk": 1, "integrated": 2}[self.drift]
-            + {"white": 0, "ar1": 1, "1/f": 3}[self.noise]
-        )
+
+def flicker_terms(span: float, dt: float) -> int:
+    """The 1/f term's number of Ornstein-Uhlenbeck states: one for each decade from one cycle per
+    record up to the Nyquist frequency (1, 10, 100, ... cycles per record below span / 2 dt), at
+    least `FLICKER_MIN_TERMS`. A 20 s record at 200 Hz (Nyquist 2000 cycles per record): 4."""
+    nyquist_cycles = max(span, dt) / (2.0 * dt)
+    return max(FLICKER_MIN_TERMS, math.floor(math.log10(max(nyquist_cycles, 1.0)) + 1e-9) + 1)
+
+
+def flicker_times(span: float, corner: float, terms: int) -> np.ndarray:
+    """The 1/f term's correlation times (s), 1 / (2 pi f_k): `terms` corners f_k spread evenly in
+    log frequency from one cycle per record (1 / span) to `corner` (Hz)."""
+    return 1.0 / (2.0 * math.pi * np.geomspace(1.0 / span, corner, terms))
 
 
 def gain_names(terms: int) -> list[str]:
@@ -675,6 +687,7 @@ class ModalModel(SignalModel):
         self.span = float(self.t[-1] - self.t[0])
         self.dt = series.dt
         self.sd = float(np.nanstd(self.y)) or 1.0
+        self.flicker_terms = flicker_terms(self.span, self.dt)  # the whole record's, kept by `head`
         if series.uniform:
             self.steps = np.array([self.span / (self.t.size - 1)])
             self.idx = np.zeros(self.t.size, dtype=np.int64)
@@ -712,7 +725,7 @@ class ModalModel(SignalModel):
             kinds.append(_OU), offsets.append(o), sizes.append(1)
             o += 1
         elif s.noise == "1/f":
-            for _ in FLICKER_DECADES:
+            for _ in range(self.flicker_terms):
                 kinds.append(_OU), offsets.append(o), sizes.append(1)
                 o += 1
         self.n = o
@@ -784,9 +797,9 @@ class ModalModel(SignalModel):
             pars[b, 0], pars[b, 1] = v("ar.time"), v("ar.rms") ** 2
             b += 1
         elif s.noise == "1/f":
-            var = v("flicker.rms") ** 2 / len(FLICKER_DECADES)
-            for d in FLICKER_DECADES:
-                pars[b, 0], pars[b, 1] = max(self.span, self.dt) / (2.0 * math.pi) * d, var
+            var = v("flicker.rms") ** 2 / self.flicker_terms
+            for tau in flicker_times(max(self.span, self.dt), v("flicker.corner"), self.flicker_terms):
+                pars[b, 0], pars[b, 1] = tau, var
                 b += 1
         if b == 0:
             pars[0, 0] = 0.0
@@ -898,7 +911,7 @@ class ModalModel(SignalModel):
 
     def head(self, n: int) -> ModalModel:
         """The same model on the first n samples: what is fixed by the whole record stays (the 1/f
-        terms' time constants and the gain drift's cosines span the whole record, the values of
+        term's states and lowest corner and the gain drift's cosines span the whole record, the values of
         parameters that are not free come from its spectrum)."""
         self._base()  # the record's own, before the cut
         out = copy.copy(self)
@@ -958,6 +971,8 @@ class ModalModel(SignalModel):
             return iu, "level at the first sample"
         if name == "ar.time":
             return "s", "AR(1) correlation time"
+        if name == "flicker.corner":
+            return "Hz", "1/f noise upper corner frequency"
         if name.startswith("gain.a"):
             return "1", f"gain drift, cosine of {int(name[6:]) / 2:g} cycles per record"
         return parameter_units(name, iu)
@@ -968,7 +983,8 @@ class ModalModel(SignalModel):
         amplitudes uniform 0..3 sd; phases uniform over a period centred on the start's (the order
         search's optimum, else the first spectral guess); level uniform over the data's range
         widened by it on each side; noise.sigma and the coloured noise's rms log-uniform
-        sd x (1e-6, 10); ar.time log-uniform (dt / 5, span); drift.rate log-uniform
+        sd x (1e-6, 10); ar.time log-uniform (dt / 5, span); flicker.corner log-uniform from
+        FLICKER_LOWEST_CORNER (10) cycles per record to Nyquist; drift.rate log-uniform
         sd / sqrt(span) x (1e-5, 30); the gain drift's coefficients uniform (-0.5, 0.5).
         (sd: the data's standard deviation.)"""
         sd, span, nyq = self.sd, max(self.span, self.dt), 0.5 * self.series.fs
@@ -999,6 +1015,7 @@ class ModalModel(SignalModel):
             out["ar.time"] = Prior("loguniform", (self.dt / 5.0, span))
         elif self.spec.noise == "1/f":
             out["flicker.rms"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
+            out["flicker.corner"] = Prior("loguniform", (min(FLICKER_LOWEST_CORNER / span, 0.1 * nyq), nyq))
         for n in gain_names(self.spec.gain):
             out[n] = Prior("uniform", (-GAIN_LIMIT, GAIN_LIMIT))
         out["noise.sigma"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
@@ -1042,6 +1059,7 @@ class ModalModel(SignalModel):
             "ar.rms": 0.5 * self.sd,
             "ar.time": 10.0 * self.dt,
             "flicker.rms": 0.3 * self.sd,
+            "flicker.corner": 0.5 * nyq,
             **dict(zip(gain_names(s.gain), map(float, self.gain_start()))),
         }
         if s.drift == "integrated":
@@ -1159,7 +1177,9 @@ class ModalModel(SignalModel):
         if s.noise == "ar1":
             out.append({"kind": "coloured noise", "model": "ar1", "rms": v("ar.rms"), "time": v("ar.time")})
         elif s.noise == "1/f":
-            out.append({"kind": "coloured noise", "model": "1/f", "rms": v("flicker.rms")})
+            out.append(
+                {"kind": "coloured noise", "model": "1/f", "rms": v("flicker.rms"), "corner": v("flicker.corner")}
+            )
         if s.gain:
             g = self.multiplier(values) - 1.0
             out.append(

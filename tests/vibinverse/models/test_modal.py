@@ -7,13 +7,23 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.linalg import expm
 
 import vibinverse as vi
 from vibinverse.errors import SceneError
 from vibinverse.kalman import log_likelihood_steps_reference
 from vibinverse.models import MODELS, model_class_for
-from vibinverse.models.modal import ModalModel, ModalSpec, _block_filter, _fill_tables, _oscillator
+from vibinverse.models.modal import (
+    FLICKER_MIN_TERMS,
+    ModalModel,
+    ModalSpec,
+    _block_filter,
+    _fill_tables,
+    _oscillator,
+    flicker_terms,
+)
 
 
 def van_loan(a: np.ndarray, gq: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -128,6 +138,7 @@ def test_filter_matches_the_numpy_kalman_filter(spec, gaps, jitter):
         **{n: v for n, v in VALUES.items() if n in m.fittable()},
         "drift.rate": 0.01 if spec.get("drift") != "integrated" else 1e-3,
         "flicker.rms": 0.3,
+        "flicker.corner": 2.0,
     }
     values = {n: values[n] for n in m.fittable()}
     assert s.uniform is (jitter == 0.0)
@@ -414,3 +425,61 @@ def test_one_mode_and_white_noise_take_the_two_state_kernel_and_keep_the_numbers
         ref = log_likelihood_steps_reference(y - mu, phis, qs, model.idx, model.h, r, p0)
         assert model.log_likelihood(v) == pytest.approx(ref, rel=1e-10)
         assert np.nansum(model.pointwise_log_likelihood(v)) == pytest.approx(ref, rel=1e-10)
+
+
+@given(
+    span=st.floats(0.5, 1e5),
+    rate=st.floats(1.0, 1e4),
+)
+@settings(max_examples=200, deadline=None)
+def test_the_flicker_term_has_a_state_for_each_decade_up_to_nyquist(span, rate):
+    """One Ornstein-Uhlenbeck state for each decade from one cycle per record to Nyquist: at
+    least three; with more, 10^(terms - 1) cycles per record lies below Nyquist, 10^terms above."""
+    dt = 1.0 / rate
+    terms = flicker_terms(span, dt)
+    nyquist_cycles = max(span, dt) / (2 * dt)
+    assert terms >= FLICKER_MIN_TERMS
+    if terms > FLICKER_MIN_TERMS:
+        assert 10.0 ** (terms - 1) <= nyquist_cycles * (1 + 1e-9) < 10.0**terms
+
+
+@pytest.mark.parametrize("corner", [50.0, 16.0, 1.0])
+def test_the_flicker_term_has_a_one_over_f_spectrum_up_to_its_corner(corner):
+    """20 s at 200 Hz: four Ornstein-Uhlenbeck states, corners from one cycle per record to
+    `flicker.corner`. The spectrum of the sampled AR(1)s the model's own tables hold,
+    S(f) = sum_k v_k (1 - phi_k^2) / |1 - phi_k e^{-i w dt}|^2, falls as f^-1 from 3 cycles per
+    record to corner / 3 (fitted log-log slope -1 +- 0.06; local slopes within +-0.3 of it, the
+    ripple of corners up to a decade apart) and as f^-2 past 3 x corner (to -2 +- 0.15 where
+    the sampling's aliasing allows: below Nyquist / 3); its variance is flicker.rms^2."""
+    n, fs = 4000, 200.0
+    s = vi.series(np.arange(n) / fs, np.random.default_rng(0).normal(size=n))
+    m = ModalModel({"modal": {"noise": "1/f"}}, s)
+    assert m.flicker_terms == 4
+    _, phis, _, _, p0 = m.tables({"level": 0.0, "flicker.rms": 0.3, "flicker.corner": corner, "noise.sigma": 1.0})
+    phi, var = np.diag(phis[0]), np.diag(p0)
+    np.testing.assert_allclose(-np.log(phi) * fs / (2 * np.pi), np.geomspace(1 / m.span, corner, 4), rtol=1e-12)
+    assert var.sum() == pytest.approx(0.09, rel=1e-12)
+
+    def spectrum(f):
+        z = np.exp(-2j * np.pi * f / fs)
+        return sum(v * (1 - p * p) / np.abs(1 - p * z) ** 2 for p, v in zip(phi, var))
+
+    f = np.geomspace(3 / m.span, corner / 3, 400)
+    slope = np.polyfit(np.log(f), np.log(spectrum(f)), 1)[0]
+    assert slope == pytest.approx(-1.0, abs=0.06)
+    assert np.abs(np.gradient(np.log(spectrum(f)), np.log(f)) - slope).max() <= 0.3
+    if 3 * corner < fs / 6:
+        f = np.geomspace(3 * corner, fs / 6, 100)
+        assert np.polyfit(np.log(f), np.log(spectrum(f)), 1)[0] == pytest.approx(-2.0, abs=0.15)
+
+
+def test_a_head_keeps_the_whole_records_flicker_term():
+    """`head` (the convergence checks' shorter stretch) keeps the record's 1/f states and lowest
+    corner, so a parameter means the same on the stretch as on the record."""
+    s = series_of(n=3000)
+    m = ModalModel({"modal": {"noise": "1/f"}}, s)
+    values = {"level": 2.0, "flicker.rms": 0.3, "flicker.corner": 5.0, "noise.sigma": 1.0}
+    h = m.head(200)
+    assert h.flicker_terms == m.flicker_terms == 4  # 150 s at 20 Hz: 1500 cycles per record to Nyquist
+    np.testing.assert_array_equal(h.tables(values)[1][0], m.tables(values)[1][0])
+    assert ModalModel({"modal": {"noise": "1/f"}}, s.head(200)).flicker_terms == FLICKER_MIN_TERMS
