@@ -106,6 +106,37 @@ def build_posterior(
         return Posterior(sm, _priors(free, table)), order, modal
 
 
+def reading_intervals(post: Posterior, readings: Mapping[str, Any], entries: list[dict[str, Any]], seed: int) -> None:
+    """For each ambiguous entry whose reading the order search fitted (`OrderResult.readings`: a
+    possible line next to a resonance), that order's MAP and Laplace 90 % intervals of the entry's
+    parameters, as the entry's `intervals` ({name: [q05, q95]}) and a sentence of its advice: the
+    resonance's values with the line, beside the fit's without it. Priors: the model's defaults,
+    the fit's own where it names the parameter."""
+    from vibinverse.models.modal import ModalModel
+    from vibinverse.pipeline import run
+
+    for entry in entries:
+        fit = readings.get(str(entry.get("alternative")))
+        if fit is None:
+            continue
+        table = copy.deepcopy(post.model.base)
+        table["modal"].update(fit.spec.table())
+        table["modal"]["start"] = dict(fit.values)
+        with scene_errors():
+            model = build_model(table, post.series, ModalModel.name)
+            priors = {**model.default_priors(), **dict(zip(post.space.names, post.space.priors))}
+            alt = run(
+                Posterior(model, {n: priors[n] for n in model.default_priors()}), "map", seed=seed, progress=False
+            )
+        p = alt.summary()["parameters"]
+        entry["intervals"] = {n: [p[n]["q05"], p[n]["q95"]] for n in entry.get("values", {}) if n in p}
+        said = ", ".join(
+            f"{n} {q[0]:.5g} to {q[1]:.5g}" for n, q in entry["intervals"].items() if n.startswith("modes[")
+        )
+        if said:
+            entry["advice"] = f"{entry.get('advice', '')} With the line, 90 % intervals: {said}.".strip()
+
+
 def fit_series(
     series: SeriesLike,
     scene: SceneLike | None = None,
@@ -144,6 +175,7 @@ def fit_series(
         result.diagnostics["model_order"] = [] if order is None else order.criterion
         if order is not None and order.ambiguous:  # a line or resonance the data cannot tell from the other kind
             result.diagnostics["ambiguous"] = [*result.diagnostics.get("ambiguous", []), *order.ambiguous]
+            reading_intervals(post, order.readings, result.diagnostics["ambiguous"], seed)
         result.data["components"] = post.model.components(result.point)
         if order is not None:
             result.timing["model_order_s"] = order.seconds

@@ -99,7 +99,9 @@ class ModalFitter:
 def outcome_from_summary(summary: dict[str, Any]) -> FitOutcome:
     """A FitOutcome from a modal fit's summary: `modes[i].*`, `lines[j].*`, their q05/q95, and the
     detection tests `mode_{i}_detected`, `line_{j}_detected` of the diagnostics (a component with
-    no test counts as claimed)."""
+    no test counts as claimed). Where the fit reports that a resonance's values depend on a line the
+    data cannot decide (an ambiguous reading with `intervals`), its intervals are the union of the
+    two readings': what the report tells the analyst."""
     p = summary["parameters"]
     diag = summary.get("diagnostics", {})
     out = FitOutcome()
@@ -118,6 +120,11 @@ def outcome_from_summary(summary: dict[str, Any]) -> FitOutcome:
     for name, entry in p.items():
         if name.startswith(("modes[", "lines[")) and entry.get("q05") is not None and entry.get("q95") is not None:
             out.intervals[name] = (float(entry["q05"]), float(entry["q95"]))
+    for reading in diag.get("ambiguous") or []:  # a resonance's values that depend on an undecided line
+        for name, (lo, hi) in (reading.get("intervals") or {}).items():
+            if name.startswith("modes[") and name in out.intervals:
+                a, b = out.intervals[name]
+                out.intervals[name] = (min(a, float(lo)), max(b, float(hi)))
     return out
 
 

@@ -104,6 +104,14 @@ def test_outcome_from_a_modal_summary():
     assert o.line_frequencies == [10.0] and o.line_amplitudes == [0.15]
     assert o.intervals["modes[0].frequency"] == (3.3, 3.5) and "modes[1].frequency" not in o.intervals
     assert "noise.sigma" not in o.intervals
+    # a resonance whose values depend on an undecided line: the union of the two readings' intervals
+    summary["diagnostics"]["ambiguous"] = [
+        {"alternative": "a line", "intervals": {"modes[0].frequency": [3.2, 3.45], "lines[1].frequency": [4, 4.1]}},
+        {"alternative": "a resonance read as a line"},  # no intervals: nothing to add
+    ]
+    o = rb.outcome_from_summary(summary)
+    assert o.intervals["modes[0].frequency"] == (3.2, 3.5) and o.intervals["modes[0].damping_ratio"] == (0.005, 0.02)
+    assert "lines[1].frequency" not in o.intervals  # another reading's line: not this fit's
 
 
 def test_score_reports_the_oracle_rates_of_each_kind():
