@@ -760,7 +760,7 @@ def near_line_candidates(fit: OrderFit, series: Series) -> list[tuple[Candidate,
     """For each resonance, a line at the residual spectrum's strongest peak within its reach
     (`near_modes`: NEAR_BANDWIDTHS half-power bandwidths plus NEAR_BINS Fourier bins), at least a
     Fourier bin from it and from every line, as (candidate with the mode's parameters free, the
-    mode's index, the independent frequencies searched there)."""
+    mode's index, the independent frequencies searched there); a peak next to two modes once."""
     spec, values, model = fit.spec, fit.values, fit.model
     dt = float(model.steps[0]) if model.steps.size == 1 else series.dt
     span, nyq = max(model.span, dt), 0.5 / dt
@@ -768,7 +768,7 @@ def near_line_candidates(fit: OrderFit, series: Series) -> list[tuple[Candidate,
     taken = [values[f"lines[{j}].frequency"] for j in range(spec.lines)]
     y0 = model.y - model.mean(values)
     df = freqs[1] - freqs[0]
-    out = []
+    out, peaks = [], []
     for i in range(spec.modes):
         f, z = values[f"modes[{i}].frequency"], values[f"modes[{i}].damping_ratio"]
         reach = NEAR_BANDWIDTHS * 2.0 * z * f + NEAR_BINS / span
@@ -781,6 +781,9 @@ def near_line_candidates(fit: OrderFit, series: Series) -> list[tuple[Candidate,
         from vibinverse.spectrum import sinusoid
 
         c = freqs[np.flatnonzero(band)[np.argmax(power[band])]]
+        if any(abs(c - done) < 0.5 * df for done in peaks):
+            continue  # the same peak next to two modes: tried once, next to the first
+        peaks.append(float(c))
         g = float(max(np.linspace(c - df, c + df, 41), key=lambda ff: sinusoid(model.t, y0, ff)[0]))
         a, ph, _ = sinusoid(model.t, y0, g)
         k = spec.lines
