@@ -761,6 +761,8 @@ def near_line_candidates(fit: OrderFit, series: Series) -> list[tuple[Candidate,
     (`near_modes`: NEAR_BANDWIDTHS half-power bandwidths plus NEAR_BINS Fourier bins), at least a
     Fourier bin from it and from every line, as (candidate with the mode's parameters free, the
     mode's index, the independent frequencies searched there); a peak next to two modes once."""
+    from vibinverse.spectrum import sinusoid
+
     spec, values, model = fit.spec, fit.values, fit.model
     dt = float(model.steps[0]) if model.steps.size == 1 else series.dt
     span, nyq = max(model.span, dt), 0.5 / dt
@@ -778,8 +780,6 @@ def near_line_candidates(fit: OrderFit, series: Series) -> list[tuple[Candidate,
             band &= np.abs(freqs - g) >= 1.0 / span
         if not band.any():
             continue
-        from vibinverse.spectrum import sinusoid
-
         c = freqs[np.flatnonzero(band)[np.argmax(power[band])]]
         if any(abs(c - done) < 0.5 * df for done in peaks):
             continue  # the same peak next to two modes: tried once, next to the first
