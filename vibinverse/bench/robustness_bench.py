@@ -33,6 +33,7 @@ true components whose gain in log-likelihood passes the order search's threshold
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import importlib.util
 import logging
 import math
@@ -199,6 +200,21 @@ def _binomial(hits: list[bool]) -> tuple[float | None, float | None]:
     return p, math.sqrt(p * (1.0 - p) / len(hits))
 
 
+Z90 = 1.6448536269514722  # the standard normal's 95 % point: a 90 % interval is +-Z90 sd
+Z_MAD = 1.482602218505602  # sd / median absolute deviation of a normal
+
+
+def interval_z(true: float, interval: tuple[float, float]) -> float:
+    """The truth's distance from a 90 % interval's centre in the interval's own sd (half-width /
+    Z90): |z| <= Z90 exactly when the interval holds the truth. Over many data sets these are
+    standard normal when the intervals are the right width and Gaussian; their robust sd says
+    whether the typical interval is too wide (< 1) or too narrow (> 1), and the fraction beyond
+    2 Z90 (0.1 % for a normal) whether the misses are a few far ones (a posterior with heavier
+    tails than its intervals)."""
+    lo, hi = interval
+    return (true - 0.5 * (lo + hi)) / (0.5 * (hi - lo) / Z90)
+
+
 def score(case: str, method: str, truths: Sequence[dict], outcomes: Sequence[FitOutcome]) -> list[dict]:
     """The rows of one case and method over its data sets (module docstring): one per parameter
     the case has (mode frequency, mode damping, line frequency, line amplitude), or one with
@@ -207,7 +223,9 @@ def score(case: str, method: str, truths: Sequence[dict], outcomes: Sequence[Fit
     and, when the truths carry their `oracle`, `oracle_detection` and `oracle_known_frequency`: the
     fraction of those components (over every data set, failed fits included) whose oracle gain
     passes its threshold, and its threshold at a known frequency; `oracle_refit_detection` the
-    same with the refitted gain (`oracle(refit=True)`; None where there is none)."""
+    same with the refitted gain (`oracle(refit=True)`; None where there is none). `z_robust_sd`
+    and `far_miss` describe how the intervals miss (`interval_z`): the robust sd (1.4826 x median
+    |z|) and the fraction with |z| > 2 Z90."""
     n = len(outcomes)
     good = [(tr, o) for tr, o in zip(truths, outcomes) if not o.failed]
     matches = []  # per data set: (mode matches, line matches)
@@ -242,7 +260,7 @@ def score(case: str, method: str, truths: Sequence[dict], outcomes: Sequence[Fit
     for param, (kind, key, attr, iname) in PARAMS.items():
         if not truth0[kind]:
             continue
-        errors, covers, missed, total = [], [], 0, 0
+        errors, covers, zs, missed, total = [], [], [], 0, 0
         for (tr, o), (mm, lm) in zip(good, matches):
             assigned = mm if kind == "modes" else lm
             values = getattr(o, attr)
@@ -256,7 +274,10 @@ def score(case: str, method: str, truths: Sequence[dict], outcomes: Sequence[Fit
                 iv = o.intervals.get(f"{kind}[{j}].{iname}")
                 if iv is not None:
                     covers.append(bool(iv[0] <= true <= iv[1]))
+                    if iv[1] > iv[0]:
+                        zs.append(interval_z(true, iv))
         cov, se = _binomial(covers)
+        az = np.abs(zs)
         rows.append(
             {
                 **common,
@@ -270,6 +291,8 @@ def score(case: str, method: str, truths: Sequence[dict], outcomes: Sequence[Fit
                 "coverage90": cov,
                 "coverage_se": se,
                 "n_intervals": len(covers),
+                "z_robust_sd": float(Z_MAD * np.median(az)) if zs else None,
+                "far_miss": float(np.mean(az > 2.0 * Z90)) if zs else None,
             }
         )
     if not rows:
@@ -286,6 +309,8 @@ def score(case: str, method: str, truths: Sequence[dict], outcomes: Sequence[Fit
                 "coverage90": None,
                 "coverage_se": None,
                 "n_intervals": 0,
+                "z_robust_sd": None,
+                "far_miss": None,
             }
         )
     return rows
@@ -319,6 +344,18 @@ def _job(job: tuple) -> list[dict]:
     return out
 
 
+def fit_record(case: str, job_fit: dict) -> dict:
+    """One fit of the run as JSON: case, seed, method, the truth (oracle gains included) and the
+    fitter's outcome (`FitOutcome`'s fields): what a later look at one case needs without a rerun."""
+    return {
+        "case": case,
+        "seed": job_fit["truth"]["seed"],
+        "method": job_fit["method"],
+        "truth": job_fit["truth"],
+        "outcome": dataclasses.asdict(job_fit["outcome"]),
+    }
+
+
 def run(
     quick: bool = False,
     n: int | None = None,
@@ -337,8 +374,8 @@ def run(
     is missing is skipped with a note), `workers` processes over the data sets; `with_oracle`:
     each data set's `oracle` too (~0.02 s a data set, 2-3 s for the dense one_over_f and
     gain_drift at 4000 samples), with `oracle_refit` its refitted gains (0.3-1 s more a data set
-    where the Kalman filter is exact). Returns {"rows", "skipped", "notes", "settings", "seconds"},
-    JSON-able; rows as `score` makes them."""
+    where the Kalman filter is exact). Returns {"rows", "fits", "skipped", "notes", "settings",
+    "seconds"}, JSON-able; rows as `score` makes them, fits one `fit_record` per fit."""
     t_start = time.perf_counter()
     n = n if n is not None else (QUICK_SETS if quick else 50)
     if fitters is None:
@@ -355,6 +392,7 @@ def run(
         log(f"  {name}: skipped ({why})")
     jobs = [(c, seed0 + s, quick, fl, with_oracle, oracle_refit) for c in cases for s in range(n)]
     rows: list[dict] = []
+    fits: list[dict] = []
     notes: set[str] = set()
     with contextlib.ExitStack() as stack:
         if workers > 1 and len(jobs) > 1:
@@ -368,8 +406,10 @@ def run(
         for c in cases:
             per = [next(results) for _ in range(n)]
             rows += _case_rows(c, fl, per, notes, log)
+            fits += [fit_record(c, x) for r in per for x in r]
     return {
         "rows": rows,
+        "fits": fits,
         "skipped": skipped,
         "notes": sorted(notes),
         "seconds": time.perf_counter() - t_start,
@@ -411,7 +451,9 @@ def _case_rows(case: str, fitters: Sequence[Fitter], per: list[list[dict]], note
 
 def table(result: dict[str, Any]) -> str:
     """The rows as a fixed-width text table (with the skipped peers and the notes below it):
-    n_iv is the number of intervals the coverage rests on, missed the true components no fitted
+    n_iv is the number of intervals the coverage rests on; z_rsd and far how they miss (`score`:
+    the robust sd of the truths' distances from the intervals' centres in the intervals' sd, and
+    the fraction of those beyond twice the 90 % half-width); missed the true components no fitted
     one matched, found the fraction matched, failed the failed fits over the data sets; oracle,
     or_kf and or_rf what the data can decide (`oracle`: the fraction of the row's components, modes
     or lines, that pass the order search's threshold at the true parameters, at a known frequency,
@@ -419,13 +461,14 @@ def table(result: dict[str, Any]) -> str:
     (line rows)."""
     fmt = lambda v, f: format("-", f">{f.split('.')[0]}") if v is None else format(v, f)
     lines = [
-        f"{'case':<12}{'method':<11}{'parameter':<16}{'med_rel_err':>12}{'cover90':>8}{'+-se':>6}{'n_iv':>5}"
+        f"{'case':<12}{'method':<11}{'parameter':<16}{'med_rel_err':>12}{'cover90':>8}{'+-se':>6}{'n_iv':>5}{'z_rsd':>6}{'far':>5}"
         f"{'missed':>7}{'found':>6}{'line_det':>9}{'oracle':>7}{'or_kf':>6}{'or_rf':>6}{'false_det':>10}{'failed':>8}{'s/fit':>8}"
     ]
     for r in result["rows"]:
         lines.append(
             f"{r['case']:<12}{r['method']:<11}{r['param']:<16}{fmt(r['median_rel_error'], '12.2e')}"
-            f"{fmt(r['coverage90'], '8.2f')}{fmt(r['coverage_se'], '6.2f')}{r['n_intervals']:>5}{r['n_missed']:>7}"
+            f"{fmt(r['coverage90'], '8.2f')}{fmt(r['coverage_se'], '6.2f')}{r['n_intervals']:>5}"
+            f"{fmt(r.get('z_robust_sd'), '6.2f')}{fmt(r.get('far_miss'), '5.2f')}{r['n_missed']:>7}"
             f"{fmt(r.get('found'), '6.2f')}{fmt(r['line_detection'], '9.2f')}"
             f"{fmt(r.get('oracle_detection'), '7.2f')}{fmt(r.get('oracle_known_frequency'), '6.2f')}"
             f"{fmt(r.get('oracle_refit_detection'), '6.2f')}"

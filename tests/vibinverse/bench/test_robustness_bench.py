@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from vibinverse.bench import robustness_bench as rb
 from vibinverse.bench import robustness_fit as rf
@@ -71,7 +73,46 @@ def test_score_counts_coverage_misses_detections_and_failures():
     # the spurious detected 7 Hz mode; a mode missed at 4.2 Hz is itself spurious (nothing there)
     assert f["false_detection"] == pytest.approx(2 / 3)
     assert f["seconds"] == pytest.approx(2.5)
+    # how the two intervals miss: the truth 0.66 of its sd from (3.4, 3.6)'s centre; 3.62 sd from
+    # (3.30, 3.40)'s, beyond twice the 90 % half-width
+    z = [(3.46 - 3.5) / (0.1 / rb.Z90), (3.46 - 3.35) / (0.05 / rb.Z90)]
+    assert f["z_robust_sd"] == pytest.approx(rb.Z_MAD * np.median(np.abs(z)))
+    assert f["far_miss"] == 0.5
+    assert by["line frequency"]["z_robust_sd"] is None and by["line frequency"]["far_miss"] is None
     json.dumps(rows)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    true=st.floats(-10.0, 10.0),
+    lo=st.floats(-10.0, 10.0),
+    width=st.floats(1e-3, 10.0),
+)
+def test_interval_z_is_within_z90_exactly_when_the_interval_holds_the_truth(true, lo, width):
+    hi = lo + width
+    z = rb.interval_z(true, (lo, hi))
+    if abs(abs(z) - rb.Z90) > 1e-9 * (1.0 + abs(z)):  # away from the edge, where rounding decides
+        assert (abs(z) <= rb.Z90) == (lo <= true <= hi)
+
+
+def test_interval_z_of_gaussian_posteriors_is_standard_normal():
+    # estimates scattered by sd 1 around the truth, each with the right 90 % interval (+-Z90): the
+    # z are the scatter itself, robust sd 1 (se ~ 1.1/sqrt(n) = 0.016 at n = 5000), far misses 0.1 %
+    rng = np.random.default_rng(0)
+    est = rng.standard_normal(5000)
+    truths = [{"modes": [{"frequency": 3.0, "damping_ratio": 0.01}], "lines": []}] * est.size
+    outs = [
+        rf.FitOutcome(
+            frequencies=[3.0 + 0.01 * e],
+            damping_ratios=[0.01],
+            intervals={"modes[0].frequency": (3.0 + 0.01 * (e - rb.Z90), 3.0 + 0.01 * (e + rb.Z90))},
+        )
+        for e in est
+    ]
+    f = {r["param"]: r for r in rb.score("clean", "m", truths, outs)}["mode frequency"]
+    assert f["coverage90"] == pytest.approx(0.90, abs=0.013)  # 3 binomial se at n = 5000
+    assert f["z_robust_sd"] == pytest.approx(1.0, abs=0.05)
+    assert f["far_miss"] < 0.004
 
 
 def test_score_noise_only_counts_any_detection_as_false():
@@ -158,6 +199,14 @@ def test_run_table_and_plot_with_a_hand_made_fitter(tmp_path):
     res = rb.run(quick=True, n=2, cases=["clean", "noise_only"], fitters=[_Fake()], workers=1, log=lambda *a: None)
     json.dumps(res)
     rows = {(r["case"], r["param"]): r for r in res["rows"]}
+    # every fit kept: case, seed, method, truth and outcome
+    assert [(f["case"], f["seed"], f["method"]) for f in res["fits"]] == [
+        ("clean", 0, "fake"),
+        ("clean", 1, "fake"),
+        ("noise_only", 0, "fake"),
+        ("noise_only", 1, "fake"),
+    ]
+    assert res["fits"][0]["outcome"]["frequencies"] == [3.5] and res["fits"][0]["truth"]["case"] == "clean"
     assert rows["clean", "mode frequency"]["coverage90"] == 1.0
     assert rows["clean", "mode frequency"]["median_rel_error"] == pytest.approx(0.0359 / 3.4641, rel=0.02)
     assert rows["clean", "line amplitude"]["line_detection"] == 1.0
