@@ -52,7 +52,6 @@ def draw(seed: int) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
 
 def fit_draw(seed: int, methods: tuple[str, ...] = ("map", "mcmc")) -> dict:
     """One draw fitted by each method: {"seed", "truth", method: {name: (q05, q95)}}."""
-    logging.disable(logging.WARNING)
     t, y, truth = draw(seed)
     out: dict = {"seed": seed, "truth": truth}
     for method in methods:
@@ -90,6 +89,7 @@ def main() -> None:
     ap.add_argument("--methods", default="map,mcmc")
     args = ap.parse_args()
     methods = tuple(args.methods.split(","))
+    logging.disable(logging.WARNING)  # the fits' progress, in this process and the workers it forks
     with ProcessPoolExecutor(args.workers) as pool:
         records = list(pool.map(fit_draw, range(args.draws), [methods] * args.draws))
     for r in coverage(records, methods):
