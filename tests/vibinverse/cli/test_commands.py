@@ -314,7 +314,8 @@ def test_ctrl_c_at_any_moment_of_a_run_is_one_line_and_exit_130(tmp_path):
 
     assert run_cli("simulate", ROOF, *FAST, "--seed", "1", "-o", str(tmp_path)).returncode == 0
     for delay in (0.4, 0.8, 1.5, 2.5):  # (earlier, CPython itself is still starting: not ours to catch)
-        args = ["fit", str(tmp_path / "series.csv"), "--scene", ROOF, "--method", "map", "-o", str(tmp_path / "r")]
+        out = tmp_path / f"r{delay}"  # its own directory: an earlier delay's run may have finished and written one
+        args = ["fit", str(tmp_path / "series.csv"), "--scene", ROOF, "--method", "map", "-o", str(out)]
         proc = subprocess.Popen(
             [sys.executable, "-m", "vibinverse", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
         )
@@ -324,7 +325,7 @@ def test_ctrl_c_at_any_moment_of_a_run_is_one_line_and_exit_130(tmp_path):
         assert "Traceback" not in err, (delay, err)
         if proc.returncode != 0:  # (a run that finished before the signal came is fine)
             assert proc.returncode == 130 and len(err.strip().splitlines()) == 1, (delay, proc.returncode, err)
-            assert not (tmp_path / "r" / "result.nc").exists()
+            assert not (out / "result.nc").exists()
 
 
 # ---------------------------------------------------------------- one meaning of -o DIR and --json
