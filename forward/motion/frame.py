@@ -275,7 +275,7 @@ def mode_zoh(k: float, c: float, m: float, dt: float) -> tuple[NDArray[np.float6
     return e[:2, :2], e[:2, 2]
 
 
-def _propagate(
+def propagate_zoh(
     phi: NDArray[np.float64], gam: NDArray[np.float64], g: NDArray[np.float64], x0: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     """x_k for x_{k+1} = Phi x_k + Gamma g_k, x_0 = x0, as second-order IIR filters (O(T), in C).
@@ -293,8 +293,9 @@ def _propagate(
     impulse = np.zeros(n + 1)
     impulse[1] = 1.0
     s = lfilter([1.0], den, impulse)  # s[k] = s_k
-    free = np.outer(s[1 : n + 1], phi @ x0) - det * np.outer(s[:n], x0)
+    free = np.empty((n, 2))
     free[0] = x0
+    free[1:] = np.outer(s[1:n], phi @ x0) - det * np.outer(s[: n - 1], x0)  # row k: Phi^k x0
     return forced + free
 
 
@@ -329,7 +330,7 @@ def simulate_linear(
             if lin.damping[i] > 0 and base_noise is None:
                 p = solve_discrete_lyapunov(phi, var[i] * np.outer(gam, gam))
                 x0 = rng.multivariate_normal(np.zeros(2), (p + p.T) / 2, method="eigh")
-            x = _propagate(phi, gam, g[:, i], x0)
+            x = propagate_zoh(phi, gam, g[:, i], x0)
             q[:, i] += x[:, 0]
             dq[:, i] += x[:, 1]
     return q, dq
