@@ -32,6 +32,15 @@ def test_independence_proposals_from_a_wrong_laplace_approximation_sample_the_po
     assert stats.kstest(draws[::10, 1], "norm").pvalue > 1e-3
 
 
+def test_the_laplace_move_keeps_a_tiny_variance_beside_a_large_one():
+    """Unconstrained sds 1e-7 and 0.3 (a frame's drive frequency and its sensor noise): the
+    proposal's sds are SCALE x each, to 1e-9 (a jitter scaled by the trace widened the tiny one
+    2-3x, which halved the importance check's effective draws)."""
+    move = LaplaceMove(np.zeros(2), np.diag([1e-14, 0.09]))
+    sd = np.sqrt(np.diag(move.chol @ move.chol.T))
+    assert sd == pytest.approx(LaplaceMove.SCALE * np.array([1e-7, 0.3]), rel=1e-9)
+
+
 def test_the_laplace_move_joins_the_differential_evolution_moves_only_with_a_covariance():
     assert len(moves()) == 2
     mixed = moves(np.zeros(3), np.eye(3))
