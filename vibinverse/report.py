@@ -211,6 +211,48 @@ def fold(t: np.ndarray, y: np.ndarray, frequency: float, bins: int = 20):
     return (np.arange(bins) + 0.5) / bins, mean, err, n
 
 
+#: a 90 % interval whose end lies within this fraction of its width from a prior bound (in the
+#: prior's own scale) piles against it: a Gaussian posterior does so only when its centre is within
+#: 2.1 sd of the bound (1.6 % of it cut off); a posterior flat down to the bound has 0.056
+PILED = 0.15
+
+
+def prior_warnings(summary: dict) -> list[str]:
+    """Warnings for parameters the data do not inform (the 90 % interval covers over half the prior)
+    or whose posterior a prior bound cuts (reported as a limit): what the data cannot decide."""
+    out: list[str] = []
+    for n, p in summary["parameters"].items():
+        bounds = p.get("prior_bounds")
+        # null bounds: an unbounded prior (strict JSON has no Infinity), read as NaN: no check
+        lo, hi = (
+            (as_number(b) for b in bounds) if isinstance(bounds, list) and len(bounds) == 2 else (math.nan, math.nan)
+        )
+        q05, q95, median = as_number(p.get("q05")), as_number(p.get("q95")), as_number(p.get("median"))
+        if not all(math.isfinite(v) for v in (lo, hi, q05, q95, median)):
+            continue
+        log = str(p.get("prior", "")).startswith("loguniform")
+        f = (lambda v: np.log(max(v, 1e-300))) if log else (lambda v: v)  # the prior's own scale
+        width = f(q95) - f(q05)
+        if width > 0.5 * (f(hi) - f(lo)):
+            out.append(
+                f"{n} is not informed by the data: its 90 % interval covers more than half of the prior "
+                f"{p.get('prior')}."
+            )
+        elif min(f(q05) - f(lo), f(hi) - f(q95)) < PILED * width:
+            # the posterior piles against a bound: the data give one side of the interval only
+            upper = f(q05) - f(lo) < f(hi) - f(q95)
+            limit, side = (f"< {q95:.3g}", "below") if upper else (f"> {q05:.3g}", "above")
+            out.append(
+                f"{n} sits at a bound of its prior {p.get('prior')}: the data give only {n} {limit} (90 %); "
+                f"{side} that the prior decides, so its median and other end are not measured. Widen the "
+                f"prior if the data should reach {side}, or check the model."
+            )
+        elif min(f(median) - f(lo), f(hi) - f(median)) < 0.5 * width:
+            # the median is nearer a bound than the interval's half-width: the posterior is cut there
+            out.append(f"{n} sits at a bound of its prior {p.get('prior')}: widen the prior or check the model.")
+    return out
+
+
 def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> list[str]:
     """Plain-language warnings an analyst must see before trusting the numbers."""
     out = []
@@ -267,26 +309,7 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
                         f"{names[i]} and {names[j]} are strongly correlated (r = {corr[i, j]:+.2f}): "
                         "the data constrain a combination of them, not each."
                     )
-    for n, p in summary["parameters"].items():
-        bounds = p.get("prior_bounds")
-        # null bounds: an unbounded prior (strict JSON has no Infinity), read as NaN: no check
-        lo, hi = (
-            (as_number(b) for b in bounds) if isinstance(bounds, list) and len(bounds) == 2 else (math.nan, math.nan)
-        )
-        q05, q95, median = as_number(p.get("q05")), as_number(p.get("q95")), as_number(p.get("median"))
-        if not all(math.isfinite(v) for v in (lo, hi, q05, q95, median)):
-            continue
-        log = str(p.get("prior", "")).startswith("loguniform")
-        f = (lambda v: np.log(max(v, 1e-300))) if log else (lambda v: v)  # the prior's own scale
-        width = f(q95) - f(q05)
-        if width > 0.5 * (f(hi) - f(lo)):
-            out.append(
-                f"{n} is not informed by the data: its 90 % interval covers more than half of the prior "
-                f"{p.get('prior')}."
-            )
-        elif min(f(median) - f(lo), f(hi) - f(median)) < 0.5 * width:
-            # the median is nearer a bound than the interval's half-width: the posterior is cut there
-            out.append(f"{n} sits at a bound of its prior {p.get('prior')}: widen the prior or check the model.")
+    out += prior_warnings(summary)
     return out
 
 

@@ -276,6 +276,14 @@ def trust(summary: dict, lines: list[VerdictLine] | None = None) -> tuple[bool |
         lags = format_number(checks.get("lags"), ".0f")
         lb = f"Ljung-Box p = {format_number(checks.get('ljung_box_p'), '.2g')} over {lags} lags"
         np_ = f"normality p = {format_number(checks.get('normality_p'), '.2g')}"
+        alpha = as_number(checks.get("alpha"))
+        if white is True and as_number(checks.get("ljung_box_p")) < alpha:  # detected, too small to matter
+            lb += f", autocorrelations {format_number(checks.get('spectral_departure'), '.2f')} in all: immaterial"
+        if normal is True and as_number(checks.get("normality_p")) < alpha:
+            np_ += (
+                f", skewness {format_number(checks.get('skewness'), '.3f')}, excess kurtosis "
+                f"{format_number(checks.get('excess_kurtosis'), '.3f')}: immaterial"
+            )
         if white is False:
             failed.append(
                 (

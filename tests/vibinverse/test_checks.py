@@ -1,9 +1,10 @@
 """Residual checks: white Gaussian residuals pass at the promised rate; coloured or heavy-tailed ones fail."""
 
 import numpy as np
+import pytest
 from scipy import stats
 
-from vibinverse.checks import ALPHA, autocorrelation, describes_data, ljung_box, residual_checks
+from vibinverse.checks import ALPHA, WHITE_MATERIAL, autocorrelation, describes_data, ljung_box, residual_checks
 
 
 def _binomial_upper(n: int, p: float) -> float:
@@ -76,3 +77,33 @@ def test_a_long_record_s_immaterial_departure_from_normality_passes():
     e = rng.standard_t(10, size=720_000)
     c = residual_checks(e / e.std())
     assert not c["normal"] and c["excess_kurtosis"] > 0.5
+
+
+def test_a_long_record_s_immaterial_autocorrelation_passes():
+    """720 000 residuals of an MA(1) with rho_1 = 0.01: Ljung-Box detects it (Q ~ n rho^2 = 72 over
+    20 lags, p < 1e-4), yet the residual spectrum is within 2 % of flat (2 sum |rho_k| ~ 0.02 plus
+    the sampling noise of 20 lags, ~0.03), so the check passes and records it; rho_1 = 0.1 fails."""
+    rng = np.random.default_rng(6)
+    e = rng.standard_normal(720_001)
+    for theta, white in ((0.01, True), (0.1, False)):
+        ma = (e[1:] + theta * e[:-1]) / np.sqrt(1 + theta**2)
+        c = residual_checks(ma)
+        assert c["ljung_box_p"] < 1e-4 and c["white"] is white
+        assert (c["spectral_departure"] <= WHITE_MATERIAL) is white
+        if white:
+            assert c["spectral_departure"] == pytest.approx(0.02 + 0.03, abs=0.03)
+
+
+def test_below_ten_thousand_samples_a_rejection_is_always_material():
+    """The smallest departure 2 sum |rho_k| Ljung-Box rejects at ALPHA over 20 lags is one lag's,
+    2 sqrt(chi2_{0.99}(20) / n), above WHITE_MATERIAL for n < ~9600: on 5000 residuals with weak
+    MA(1) or MA(7) correlation, every rejection fails the check (none is waved through)."""
+    rng = np.random.default_rng(7)
+    rejected = 0
+    for theta in np.linspace(0.02, 0.08, 40):
+        e = rng.standard_normal(5007)
+        for lag in (1, 7):
+            c = residual_checks((e[lag:] + theta * e[:-lag])[:5000])
+            rejected += c["ljung_box_p"] < ALPHA
+            assert c["white"] is bool(c["ljung_box_p"] >= ALPHA)
+    assert rejected >= 10  # the loop did test rejections

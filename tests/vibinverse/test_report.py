@@ -428,6 +428,15 @@ def test_bound_warning_is_for_a_posterior_cut_by_its_prior_not_for_a_wide_prior(
     assert warnings_for(summary(0.0467, 0.0446, 0.0492, "loguniform(7e-08, 4.2)", [7e-8, 4.2]), None, ["x"]) == []
     cut = warnings_for(summary(0.0005, 0.00003, 0.0015, "uniform(0, 0.1)", [0.0, 0.1]), None, ["x"])
     assert len(cut) == 1 and "sits at a bound" in cut[0]
+    assert "the data give only x < 0.0015 (90 %); below that the prior decides" in cut[0]
+    # the sensor noise of a one-hour record without any: flat in log sigma down to the prior's 1e-8
+    # (its median 1.27 in ln from the bound, more than half the interval's 2.31: the older rule missed it)
+    noise = warnings_for(summary(3.57e-8, 1.14e-8, 1.15e-7, "loguniform(1e-08, 1000)", [1e-8, 1e3]), None, ["x"])
+    assert len(noise) == 1 and "only x < 1.15e-07 (90 %)" in noise[0]
+    high = warnings_for(summary(0.97, 0.75, 0.995, "uniform(0, 1)", [0.0, 1.0]), None, ["x"])
+    assert len(high) == 1 and "only x > 0.75 (90 %); above that the prior decides" in high[0]
+    inside = warnings_for(summary(0.4, 0.3, 0.5, "uniform(0, 1)", [0.0, 1.0]), None, ["x"])  # 4 sd from 0
+    assert inside == []
     wide = warnings_for(summary(0.5, 0.05, 0.95, "uniform(0, 1)", [0.0, 1.0]), None, ["x"])
     assert len(wide) == 1 and "not informed" in wide[0]
 

@@ -91,6 +91,11 @@ def test_residuals_decide_too():
     v = verdict(summary(diagnostics__residual_checks=bad))
     assert v.trusted is False and "not white (Ljung-Box p = 1e-05 over 20 lags)" in v.reasons[0]
     assert v.headline.endswith("fit NOT trustworthy: residuals not white")
+    # a long record's Ljung-Box test detects autocorrelations too small to matter: passed, and said so
+    small = {**bad, "ljung_box_p": 8e-4, "spectral_departure": 0.064, "white": True, "alpha": 0.01}
+    v = verdict(summary(diagnostics__residual_checks=small))
+    assert v.trusted is True
+    assert "Ljung-Box p = 0.0008 over 20 lags, autocorrelations 0.06 in all: immaterial" in " ".join(v.reasons)
 
 
 def test_an_approximation_has_no_rhat_and_can_fail_on_its_hessian():

@@ -26,6 +26,7 @@ from vibinverse.io.atomic import check_paths, write_all
 from vibinverse.io.builtin import builtin_scene
 from vibinverse.io.scenes import read_scene
 from vibinverse.io.simulation import plot_series, write_series_csv
+from vibinverse.report import prior_warnings
 from vibinverse.verdict import verdict
 
 logger = logging.getLogger("vibinverse")
@@ -323,6 +324,8 @@ def cmd_fit(args: argparse.Namespace) -> dict[str, Any]:
     for d in result.detections:
         if not d.detected:
             logger.info(f"  no {d.what} detected (log-likelihood gain {d.delta_loglike:.1f} < {d.threshold:.1f})")
+    for note in prior_warnings(summary):
+        logger.warning(note)
     written = [nc, summary_path, *([chain] if result.chains is not None and chain.exists() else [])]
     written += [pixels_csv] if pixels_csv is not None else []
     logger.info(f"wrote {', '.join(map(str, written))}")
