@@ -169,7 +169,7 @@ def _simulate_image(args: argparse.Namespace) -> dict[str, Any]:
 
 
 DEMO_WORKERS = 1  # threads (`ThreadMap`) gave no gain here: the stage after sampling is serial; a pool was slower
-DEMO_STEPS = 7000  # the demo converges in ~1600 steps (R-hat <= 1.01, ESS >= 400); the cap keeps it < 3 min
+DEMO_STEPS = 7000  # the demo converges in ~1400 steps (R-hat <= 1.01, ESS >= 400); the cap keeps it < 3 min
 
 
 def cmd_demo(args: argparse.Namespace) -> dict[str, Any]:

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import logging
 import warnings
-from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -31,7 +30,7 @@ import numpy as np
 
 from vibinverse.errors import Unsupported
 from vibinverse.estimators.base import Estimator, base_result, register_estimator
-from vibinverse.estimators.mcmc import ESS_MIN, LaplaceMove
+from vibinverse.estimators.mcmc import ESS_MIN, LaplaceMove, split_scales
 from vibinverse.posterior import Posterior
 from vibinverse.result import FitResult
 
@@ -39,34 +38,6 @@ logger = logging.getLogger(__name__)
 
 IMPORTANCE_DRAWS = 2000
 KHAT_MAX = 0.7
-#: the probes of `split_scales`, in Laplace sds along each axis: to 16, since an exponential tail's
-#: matching scale keeps growing with the distance (as sqrt(delta)) and must be met where its mass is
-PROBES = (1.0, 2.0, 4.0, 8.0, 16.0)
-#: the smallest log posterior drop a probe is read by: a side flat out to delta gets at most 2 delta
-MIN_DROP = 0.125
-#: the smallest scale: a side steeper than the Laplace curvature says is still given 1/10 of it
-MIN_SCALE = 0.1
-
-
-def split_scales(log_posterior: Callable[[np.ndarray], np.ndarray], mean: np.ndarray, chol: np.ndarray) -> np.ndarray:
-    """(d, 2) scales of a split t (Geweke 1989, "Bayesian inference in econometric models using
-    Monte Carlo integration", Econometrica 57): along column i of `chol` (the Laplace covariance's Cholesky
-    factor), on the positive [0] and the negative [1] side of `mean`, the largest
-    delta / sqrt(2 drop(delta)) over the PROBES delta, drop the fall of the log posterior from the
-    mean: 1 for a Gaussian posterior that the Laplace approximation describes, the side's own scale
-    for a split normal, and growing as the side's tail is heavier. `log_posterior` maps rows to
-    values; 10 d evaluations."""
-    mean = np.asarray(mean, dtype=float)
-    d = mean.size
-    deltas = np.asarray(PROBES)
-    steps = np.concatenate([sign * deltas[:, None, None] * chol.T[None, :, :] for sign in (1.0, -1.0)])
-    lp = np.asarray(log_posterior(np.vstack([mean[None, :], (mean + steps).reshape(-1, d)])), dtype=float)
-    if not np.isfinite(lp[0]):
-        return np.ones((d, 2))
-    drop = (lp[0] - lp[1:]).reshape(2, deltas.size, d)  # (side, delta, axis)
-    drop = np.where(np.isfinite(drop), np.maximum(drop, MIN_DROP), np.inf)
-    scale = np.max(deltas[None, :, None] / np.sqrt(2.0 * drop), axis=1)  # (side, axis)
-    return np.maximum(scale, MIN_SCALE).T
 
 
 def log_posteriors(posterior: Posterior, zs: np.ndarray, workers: int = 1) -> np.ndarray:

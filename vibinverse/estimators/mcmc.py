@@ -13,6 +13,7 @@ import math
 import signal
 import time
 import warnings
+from collections.abc import Callable
 from contextlib import contextmanager
 from multiprocessing import get_context
 from pathlib import Path
@@ -270,7 +271,7 @@ def run(
             problem if pool is None or isinstance(pool, ThreadMap) else _worker_log_prob,
             pool=pool,
             backend=backend,
-            moves=moves(z_map, cov_z),
+            moves=moves(z_map, cov_z, laplace_scales(problem, z_map, cov_z)),
         )
         with _stop_on_signals() as flag, _progress(progress, backend.iteration, max_steps) as bar:
             check(backend)
@@ -310,7 +311,22 @@ def run(
     }
 
 
-def moves(z_map: np.ndarray | None = None, cov_z: np.ndarray | None = None) -> list:
+def laplace_scales(problem: Posterior, z_map: np.ndarray, cov_z: np.ndarray) -> np.ndarray | None:
+    """The split-t scales of the Laplace move (`split_scales`, 10 evaluations a parameter; the same
+    on a resumed run, so its chain continues exactly); None without a usable covariance. On the
+    demo's posterior (damping ratio 0.8 / 1.8, drive amplitude 1.0 / 2.0 on either side) the
+    sampler stopped after 1400 steps instead of 2600 (three other data sets: 3200 -> 2000,
+    2400 -> 1600, 1600 -> 2400)."""
+    if not np.all(np.isfinite(cov_z)):
+        return None
+    try:
+        chol = np.linalg.cholesky(0.5 * (cov_z + cov_z.T))
+    except np.linalg.LinAlgError:
+        return None
+    return split_scales(lambda zs: np.array([problem.log_posterior(z) for z in zs]), z_map, chol)
+
+
+def moves(z_map: np.ndarray | None = None, cov_z: np.ndarray | None = None, scales: np.ndarray | None = None) -> list:
     """Differential-evolution proposals (Ter Braak 2006; Ter Braak & Vrugt 2008) mixed as emcee's
     docs suggest, which cut the autocorrelation time ~3x against the default stretch move on the
     frame posterior (its parameters are correlated); with the MAP stage's Laplace approximation,
@@ -321,7 +337,7 @@ def moves(z_map: np.ndarray | None = None, cov_z: np.ndarray | None = None) -> l
     if z_map is None or cov_z is None or not np.all(np.isfinite(cov_z)):
         return de
     try:
-        laplace = LaplaceMove(z_map, cov_z)
+        laplace = LaplaceMove(z_map, cov_z, scales)
     except np.linalg.LinAlgError:
         return de
     return [(m, (1 - LAPLACE_WEIGHT) * w) for m, w in de] + [(laplace, LAPLACE_WEIGHT)]
@@ -336,7 +352,7 @@ class LaplaceMove(emcee.moves.MHMove):
 
     `scales` (d x 2), if given, makes it a split t (Geweke 1989): along the i-th column of the
     covariance's Cholesky factor the draw is stretched by scales[i, 0] on the positive side and
-    scales[i, 1] on the negative one, each side keeping half the mass (`importance.split_scales`
+    scales[i, 1] on the negative one, each side keeping half the mass (`split_scales`
     measures them on the posterior, for a parameter whose posterior is cut by its prior)."""
 
     DF = 5.0
@@ -378,6 +394,36 @@ class LaplaceMove(emcee.moves.MHMove):
     def _propose(self, coords: np.ndarray, random) -> tuple[np.ndarray, np.ndarray]:
         new = self.draw(coords.shape[0], random)
         return new, self.log_density(coords) - self.log_density(new)
+
+
+#: the probes of `split_scales`, in Laplace sds along each axis: to 16, since an exponential tail's
+#: matching scale keeps growing with the distance (as sqrt(delta)) and must be met where its mass is
+PROBES = (1.0, 2.0, 4.0, 8.0, 16.0)
+#: the smallest log posterior drop a probe is read by: a side flat out to delta gets at most 2 delta
+MIN_DROP = 0.125
+#: the smallest scale: a side steeper than the Laplace curvature says is still given 1/10 of it
+MIN_SCALE = 0.1
+
+
+def split_scales(log_posterior: Callable[[np.ndarray], np.ndarray], mean: np.ndarray, chol: np.ndarray) -> np.ndarray:
+    """(d, 2) scales of a split t (Geweke 1989, "Bayesian inference in econometric models using
+    Monte Carlo integration", Econometrica 57): along column i of `chol` (the Laplace covariance's Cholesky
+    factor), on the positive [0] and the negative [1] side of `mean`, the largest
+    delta / sqrt(2 drop(delta)) over the PROBES delta, drop the fall of the log posterior from the
+    mean: 1 for a Gaussian posterior that the Laplace approximation describes, the side's own scale
+    for a split normal, and growing as the side's tail is heavier. `log_posterior` maps rows to
+    values; 10 d evaluations."""
+    mean = np.asarray(mean, dtype=float)
+    d = mean.size
+    deltas = np.asarray(PROBES)
+    steps = np.concatenate([sign * deltas[:, None, None] * chol.T[None, :, :] for sign in (1.0, -1.0)])
+    lp = np.asarray(log_posterior(np.vstack([mean[None, :], (mean + steps).reshape(-1, d)])), dtype=float)
+    if not np.isfinite(lp[0]):
+        return np.ones((d, 2))
+    drop = (lp[0] - lp[1:]).reshape(2, deltas.size, d)  # (side, delta, axis)
+    drop = np.where(np.isfinite(drop), np.maximum(drop, MIN_DROP), np.inf)
+    scale = np.max(deltas[None, :, None] / np.sqrt(2.0 * drop), axis=1)  # (side, axis)
+    return np.maximum(scale, MIN_SCALE).T
 
 
 def due(n: int) -> bool:

@@ -11,8 +11,8 @@ from scipy.stats import multivariate_normal
 
 from vibinverse.errors import Unsupported
 from vibinverse.estimators.base import base_result
-from vibinverse.estimators.importance import KHAT_MAX, LaplaceImportance, split_scales, systematic_resample
-from vibinverse.estimators.mcmc import ESS_MIN, LaplaceMove
+from vibinverse.estimators.importance import KHAT_MAX, LaplaceImportance, systematic_resample
+from vibinverse.estimators.mcmc import ESS_MIN, LaplaceMove, split_scales
 from vibinverse.priors import parse_prior
 
 
