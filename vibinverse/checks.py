@@ -52,14 +52,14 @@ def autocorrelation(e: np.ndarray, lags: int) -> np.ndarray:
     return out
 
 
-def ljung_box(e: np.ndarray, lags: int | None = None) -> tuple[float, float, int]:
+def ljung_box(e: np.ndarray, lags: int | None = None, rho: np.ndarray | None = None) -> tuple[float, float, int]:
     """(Q, p-value, lags) of the Ljung-Box test of `e` (NaN = gap); lags defaults to
-    min(MAX_LAGS, n // 5)."""
+    min(MAX_LAGS, n // 5); `rho`, the autocorrelation at lags 1..lags, when already computed."""
     n = int(np.isfinite(e).sum())
     h = int(lags if lags is not None else min(MAX_LAGS, n // 5))
     if h < 1:
         return math.nan, math.nan, 0
-    rho = autocorrelation(e, h)
+    rho = autocorrelation(e, h) if rho is None else rho
     k = np.arange(1, h + 1)
     q = float(n * (n + 2) * np.nansum(rho * rho / (n - k)))
     return q, float(stats.chi2.sf(q, h)), h
@@ -71,8 +71,10 @@ def residual_checks(e: np.ndarray) -> dict[str, Any]:
     good = e[np.isfinite(e)]
     if good.size < 20:
         return {}
-    _, p_white, h = ljung_box(e)
-    departure = float(2.0 * np.nansum(np.abs(autocorrelation(e, h)))) if h else math.nan
+    h = min(MAX_LAGS, good.size // 5)
+    rho = autocorrelation(e, h)
+    _, p_white, h = ljung_box(e, h, rho)
+    departure = float(2.0 * np.nansum(np.abs(rho)))
     p_normal = float(stats.normaltest(good).pvalue)
     skew, kurtosis = float(stats.skew(good)), float(stats.kurtosis(good))
     material = abs(skew) > SKEW_MATERIAL or abs(kurtosis) > KURTOSIS_MATERIAL

@@ -30,7 +30,7 @@ import numpy as np
 
 from vibinverse.errors import Unsupported
 from vibinverse.estimators.base import Estimator, base_result, register_estimator
-from vibinverse.estimators.mcmc import ESS_MIN, LaplaceMove, split_scales
+from vibinverse.estimators.mcmc import ESS_MIN, split_laplace
 from vibinverse.posterior import Posterior
 from vibinverse.result import FitResult
 
@@ -78,11 +78,10 @@ class LaplaceImportance(Estimator):
         import arviz as az
 
         try:
-            laplace = LaplaceMove(start.z, start.cov_z)
+            proposal = split_laplace(lambda zs: log_posteriors(posterior, zs, workers), start.z, start.cov_z)
         except np.linalg.LinAlgError as exc:
             raise Unsupported("the Laplace covariance is not positive definite") from exc
-        scales = split_scales(lambda zs: log_posteriors(posterior, zs, workers), start.z, laplace.chol / laplace.SCALE)
-        proposal = LaplaceMove(start.z, start.cov_z, scales)
+        scales = proposal.scales
         logger.debug("importance sampling: split-t scales %s", np.round(scales, 2).tolist())
         rng = np.random.default_rng(seed)
         zs = proposal.draw(draws, rng)

@@ -271,7 +271,7 @@ def run(
             problem if pool is None or isinstance(pool, ThreadMap) else _worker_log_prob,
             pool=pool,
             backend=backend,
-            moves=moves(z_map, cov_z, laplace_scales(problem, z_map, cov_z)),
+            moves=moves(z_map, cov_z, lambda zs: np.array([problem.log_posterior(z) for z in zs])),
         )
         with _stop_on_signals() as flag, _progress(progress, backend.iteration, max_steps) as bar:
             check(backend)
@@ -311,33 +311,33 @@ def run(
     }
 
 
-def laplace_scales(problem: Posterior, z_map: np.ndarray, cov_z: np.ndarray) -> np.ndarray | None:
-    """The split-t scales of the Laplace move (`split_scales`, 10 evaluations a parameter; the same
-    on a resumed run, so its chain continues exactly); None without a usable covariance. On the
-    demo's posterior (damping ratio 0.8 / 1.8, drive amplitude 1.0 / 2.0 on either side) the
-    sampler stopped after 1400 steps instead of 2600 (three other data sets: 3200 -> 2000,
-    2400 -> 1600, 1600 -> 2400)."""
-    if not np.all(np.isfinite(cov_z)):
-        return None
-    try:
-        chol = np.linalg.cholesky(0.5 * (cov_z + cov_z.T))
-    except np.linalg.LinAlgError:
-        return None
-    return split_scales(lambda zs: np.array([problem.log_posterior(z) for z in zs]), z_map, chol)
+def split_laplace(log_posterior: Callable[[np.ndarray], np.ndarray], mean: np.ndarray, cov: np.ndarray) -> LaplaceMove:
+    """The Laplace move as a split t, its scales measured on the posterior (`split_scales`, 10
+    evaluations a parameter; deterministic, so a resumed run continues the same chain). On the
+    demo's posterior (damping ratio 0.8 / 1.8, drive amplitude 1.0 / 2.0 on either side) the sampler
+    stopped after 1400 steps instead of 2600 (three other data sets: 3200 -> 2000, 2400 -> 1600,
+    1600 -> 2400). LinAlgError when the covariance is not positive definite."""
+    symmetric = LaplaceMove(mean, cov)
+    return LaplaceMove(mean, cov, split_scales(log_posterior, mean, symmetric.chol / symmetric.SCALE))
 
 
-def moves(z_map: np.ndarray | None = None, cov_z: np.ndarray | None = None, scales: np.ndarray | None = None) -> list:
+def moves(
+    z_map: np.ndarray | None = None,
+    cov_z: np.ndarray | None = None,
+    log_posterior: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> list:
     """Differential-evolution proposals (Ter Braak 2006; Ter Braak & Vrugt 2008) mixed as emcee's
     docs suggest, which cut the autocorrelation time ~3x against the default stretch move on the
     frame posterior (its parameters are correlated); with the MAP stage's Laplace approximation,
     half the steps are independence proposals from a heavier-tailed version of it
     (`LaplaceMove`): where the posterior is near Gaussian in the unconstrained space, as it is
-    for data that inform every parameter, a step then forgets where it started."""
+    for data that inform every parameter, a step then forgets where it started. Given the
+    `log_posterior` (rows to values), that approximation is a split t (`split_laplace`)."""
     de = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
     if z_map is None or cov_z is None or not np.all(np.isfinite(cov_z)):
         return de
     try:
-        laplace = LaplaceMove(z_map, cov_z, scales)
+        laplace = LaplaceMove(z_map, cov_z) if log_posterior is None else split_laplace(log_posterior, z_map, cov_z)
     except np.linalg.LinAlgError:
         return de
     return [(m, (1 - LAPLACE_WEIGHT) * w) for m, w in de] + [(laplace, LAPLACE_WEIGHT)]
