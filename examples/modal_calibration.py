@@ -11,7 +11,10 @@ the prior, an exact posterior's 90 % interval holds the truth in 90 % of them wh
 standard error here is the approximation's (or the sampler's) fault, not the prior's.
 
 2026-12-03, 160 draws: emcee (`mcmc`) 0.894, 0.919, 0.900 for frequency, damping ratio and RMS
-(se 0.024); MAP + Laplace (`map`) 0.875, 0.769, 0.819.
+(se 0.024); MAP + Laplace (`map`) 0.875, 0.769, 0.819; the Laplace approximation importance-sampled
+(`importance`: 142 draws passed its PSIS check, 18 fell back to emcee) 0.894, 0.938, 0.912.
+
+    python examples/modal_calibration.py --methods importance,map   # ~5 min on 2 cores
 """
 
 # ruff: noqa: T201  (an example prints its results)
@@ -21,6 +24,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -51,11 +55,16 @@ def draw(seed: int) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
 
 
 def fit_draw(seed: int, methods: tuple[str, ...] = ("map", "mcmc")) -> dict:
-    """One draw fitted by each method: {"seed", "truth", method: {name: (q05, q95)}}."""
+    """One draw fitted by each method: {"seed", "truth", method: {name: (q05, q95)}, "seconds":
+    {method: s}, "approximation": {method: the summary's approximation (None: posterior draws)}}."""
     t, y, truth = draw(seed)
-    out: dict = {"seed": seed, "truth": truth}
+    out: dict = {"seed": seed, "truth": truth, "seconds": {}, "approximation": {}}
     for method in methods:
-        p = vi.fit(vi.series(t, y), ORDER, method=method, free=PRIORS).summary()["parameters"]
+        t0 = time.perf_counter()
+        summary = vi.fit(vi.series(t, y), ORDER, method=method, free=PRIORS).summary()
+        out["seconds"][method] = time.perf_counter() - t0
+        out["approximation"][method] = summary["approximation"]
+        p = summary["parameters"]
         out[method] = {k: (p[k]["q05"], p[k]["q95"]) for k in truth}
     return out
 
@@ -94,9 +103,14 @@ def main() -> None:
         records = list(pool.map(fit_draw, range(args.draws), [methods] * args.draws))
     for r in coverage(records, methods):
         print(
-            f"{r['parameter']:<24} {r['method']:<5} coverage {r['coverage90']:.3f} +- {r['se']:.3f}"
+            f"{r['parameter']:<24} {r['method']:<10} coverage {r['coverage90']:.3f} +- {r['se']:.3f}"
             f"  (truth above {r['truth_above']:.2f}, below {r['truth_below']:.2f})"
         )
+    for m in methods:
+        kinds = [str(r["approximation"][m]) for r in records]
+        counts = ", ".join(f"{k} {kinds.count(k)}" for k in dict.fromkeys(kinds))
+        seconds = np.median([r["seconds"][m] for r in records])
+        print(f"{m:<10} median {seconds:.1f} s a fit; intervals from: {counts} (None: posterior draws)")
 
 
 if __name__ == "__main__":

@@ -874,8 +874,7 @@ def choose_order(
     fixed = dict((table or {}).get("modal") or {})
     spec = ModalSpec.from_table({"modal": {k: fixed[k] for k in SEARCHED if k in fixed}})
     search = {k: k not in fixed for k in SEARCHED}
-    model0 = ModalModel({"modal": spec.table()}, series)
-    current = fit_order(series, spec, model0.guesses(model0.default_priors()))
+    current = fit_fixed(series, spec)
     rows: list[dict[str, Any]] = [_row(0, "start: " + _describe(spec), current, None, "full", True)]
     logger.info("model order: %s, BIC %.1f", _describe(spec), current.bic)
     ambiguous: list[dict[str, Any]] = []
@@ -901,6 +900,67 @@ def choose_order(
         current = best
         step += 1
     return OrderResult(current, rows, time.perf_counter() - t0, ambiguous, readings)
+
+
+def fit_fixed(series: Series, spec: ModalSpec) -> OrderFit:
+    """`spec` fitted by maximum likelihood from the better (in ln L) of two starts: the spectral
+    starts of the whole order (`ModalModel.guesses`: the strongest peaks of the data's spectrum),
+    and the order built up as the forward search builds it (`built_up`). With the counts given by
+    the user the search adds nothing, and the spectral starts alone missed a weak line next to a
+    resonance: with AR(1) noise the bench's weak_drive case put the line on the resonance's peak
+    (or at 25-47 Hz) and the damping ratio 3x too high, 14 below the true reading in ln L."""
+    model = ModalModel({"modal": spec.table()}, series)
+    direct = fit_order(series, spec, model.guesses(model.default_priors()))
+    if not (spec.modes or spec.lines):
+        return direct
+    built = built_up(series, spec)
+    if built is not None and built.log_likelihood > direct.log_likelihood:
+        logger.info(
+            "model order: %s built up component by component, ln L %.1f (spectral starts %.1f)",
+            _describe(spec),
+            built.log_likelihood,
+            direct.log_likelihood,
+        )
+        return built
+    return direct
+
+
+def built_up(series: Series, spec: ModalSpec) -> OrderFit | None:
+    """`spec`'s modes and lines added one at a time to its nuisance terms, as the forward search
+    adds them (`candidates`: a mode and a line at the strongest residual peak, a split of a broad
+    mode; `near_line_candidates`: a line next to each resonance), each step taking the candidate of
+    the highest ln L after a partial fit (the counts are given: no criterion decides), refitted in
+    full. None when a step has no candidate."""
+    bare = replace(spec, modes=0, lines=0)
+    model = ModalModel({"modal": bare.table()}, series)
+    current = fit_order(series, bare, model.guesses(model.default_priors()))
+    span = max(current.model.span, series.dt)
+    while current.spec.modes < spec.modes or current.spec.lines < spec.lines:
+        search = dict.fromkeys(SEARCHED, False)
+        search["modes"] = current.spec.modes < spec.modes
+        search["lines"] = current.spec.lines < spec.lines
+        cands = candidates(current, series, search, (spec.modes, spec.lines))
+        if search["lines"]:
+            cands += [c for c, _, _ in near_line_candidates(current, series)]
+        partial = [
+            (
+                c,
+                fit_order(
+                    series,
+                    c.spec,
+                    c.starts,
+                    free=[*c.new, "level", "noise.sigma", *near_modes(c, span)],
+                    maxiter=60,
+                    ftol=1e-9,
+                ),
+            )
+            for c in cands
+        ]
+        if not partial:
+            return None
+        c, pf = max(partial, key=lambda cp: cp[1].log_likelihood)
+        current = fit_order(series, c.spec, [pf.values])
+    return current
 
 
 def near_modes(c: Candidate, span: float) -> list[str]:

@@ -2,7 +2,7 @@
 the next; `--method` stops it at a stage. A record longer than LONG_RECORD samples finds its MAP over
 growing stretches (`stretched_map`). A record of more than IMPORTANCE_RECORD samples has its
 posterior by default by importance sampling of the Laplace approximation (`estimators.importance`),
-emcee only when that fails its check.
+emcee only when that fails its check; `importance` asks for that stage on a record of any length.
 
 A stage that fails is recorded and the chain goes on: a declined SINDy leaves the MAP to start from
 the spectral candidates, and a casadi MAP that does not cover the model or fails falls back to the
@@ -31,7 +31,7 @@ from vibinverse.result import FitResult
 
 logger = logging.getLogger(__name__)
 
-METHODS = ("spectral", "sindy", "casadi", "map", "mcmc", "auto")
+METHODS = ("spectral", "sindy", "casadi", "map", "importance", "mcmc", "auto")
 # another reading of the spectrum closer than this in log posterior is reported as ambiguous (the
 # 5-sigma gain of the detection test: one reading is claimed only when the other is that far below)
 AMBIGUITY_MARGIN = DETECTION_GAIN
@@ -117,13 +117,13 @@ def run(
     if method in ("map", "casadi"):
         best.timing = timing
         return best
-    if method == "auto" and posterior.series.time.size > IMPORTANCE_RECORD:
+    if method == "importance" or (method == "auto" and posterior.series.time.size > IMPORTANCE_RECORD):
         try:
             result = LaplaceImportance().fit(posterior, best, seed=seed, workers=workers)
         except Unsupported as exc:
-            logger.info("%s; sampling with emcee", exc)
+            (logger.warning if method == "importance" else logger.info)("%s; sampling with emcee", exc)
         else:
-            return _finish(result, best, sindy, timing, "auto")
+            return _finish(result, best, sindy, timing, method)
     result = Emcee().fit(
         posterior,
         best,
@@ -134,7 +134,7 @@ def run(
         max_steps=max_steps,
         progress=progress,
     )
-    return _finish(result, best, sindy, timing, "mcmc" if method == "mcmc" else "auto")
+    return _finish(result, best, sindy, timing, method)
 
 
 def _finish(result: FitResult, best: FitResult, sindy: dict | None, timing: dict, method: str) -> FitResult:

@@ -221,11 +221,11 @@ def test_a_long_record_s_default_fit_importance_samples_its_laplace_approximatio
 
 
 @pytest.mark.slow
-def test_importance_sampling_gives_emcee_s_intervals_on_a_three_mode_record(monkeypatch):
+def test_importance_sampling_gives_emcee_s_intervals_on_a_three_mode_record():
     """Past IMPORTANCE_RECORD samples the default fit importance-samples the Laplace approximation
     instead of running emcee (2000 calls against ~20 000: a 36 000-sample three-mode record's fit
-    took 67 s instead of 141 s). On the three-mode ambient case (threshold lowered to its 4000
-    samples) the check passes and every 90 % interval's ends and median are emcee's to 0.12 of the
+    took 67 s instead of 141 s); `--method importance` asks for it at any length. On the three-mode
+    ambient case (4000 samples) the check passes and every 90 % interval's ends and median are emcee's to 0.12 of the
     interval's width: the quantiles' Monte Carlo error is ~0.02 of the width at 1000 effective draws
     (emcee's ~0.015 at 2000), so 0.12 is 4 standard errors of their difference. The Laplace
     approximation uncorrected is off by up to 0.17 of the width here (first mode's rms and damping
@@ -236,11 +236,11 @@ def test_importance_sampling_gives_emcee_s_intervals_on_a_three_mode_record(monk
 
     data = simulate_case("three_modes", 3)
     s = vi.series(data.time, data.intensity)
-    monkeypatch.setattr(pipeline, "IMPORTANCE_RECORD", data.time.size - 1)
-    fast = vi.fit(s).summary()
+    fast = vi.fit(s, method="importance").summary()
     assert fast["approximation"] == "importance" and "mcmc_s" not in fast["timing"]
+    assert fast["method"] == "importance"
     assert fast["diagnostics"]["psis_khat"] < 0.7 and fast["diagnostics"]["importance_ess"] >= 400
-    monkeypatch.setattr(pipeline, "IMPORTANCE_RECORD", data.time.size)
+    assert data.time.size <= pipeline.IMPORTANCE_RECORD  # the default fit of this record runs emcee
     sampled = vi.fit(s).summary()
     assert "mcmc_s" in sampled["timing"] and sampled["diagnostics"]["converged"]
     assert set(fast["parameters"]) == set(sampled["parameters"])
@@ -248,3 +248,24 @@ def test_importance_sampling_gives_emcee_s_intervals_on_a_three_mode_record(monk
         width = p["q95"] - p["q05"]
         for q in ("q05", "median", "q95"):
             assert abs(fast["parameters"][name][q] - p[q]) <= 0.12 * width, (name, q)
+
+
+def test_method_importance_samples_with_emcee_when_its_check_fails(monkeypatch, caplog):
+    """`importance` whose check fails (here forced: an ESS floor no 2000 draws can reach) warns with
+    the reason and samples with emcee: the intervals are then quantiles of posterior draws."""
+    import logging
+
+    import vibinverse as vi
+    import vibinverse.estimators.importance as importance
+    from vibinverse.bench.robustness_cases import simulate as simulate_case
+
+    data = simulate_case("clean", 0)
+    n = data.time.size // 4
+    s = vi.series(data.time[:n], data.intensity[:n])
+    order = {"modal": {"modes": 1, "lines": 1, "drift": False, "noise": "white", "gain": False}}
+    monkeypatch.setattr(importance, "ESS_MIN", 1e9)
+    with caplog.at_level(logging.WARNING, logger="vibinverse.pipeline"):
+        summary = vi.fit(s, order, method="importance", max_steps=200).summary()
+    assert any("fails its importance check" in r.message and "emcee" in r.message for r in caplog.records)
+    assert summary["method"] == "importance" and summary["approximation"] is None
+    assert "mcmc_s" in summary["timing"] and "importance_s" not in summary["timing"]

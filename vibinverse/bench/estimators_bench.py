@@ -70,7 +70,7 @@ SCENARIOS = {
 }
 SIGMAS = SCENARIOS["frame"].sigmas
 PARAMS = SCENARIOS["frame"].params
-METHODS = ("spectral", "sindy", "casadi", "map", "mcmc")
+METHODS = ("spectral", "sindy", "casadi", "map", "importance", "mcmc")
 
 
 def _table(scene_path: Path, sigma: float) -> dict:
@@ -165,7 +165,8 @@ def run(
                 fits[method] = _fits(table, n, method, workers, max_steps, log)
             if snr in mcmc_snrs and mcmc_seeds > 0:
                 _quiet(_fit, (table, 0, "casadi", max_steps))  # compile the MAP once; forked workers inherit it
-                fits["mcmc"] = _fits(table, mcmc_seeds, "mcmc", workers, max_steps, log, warm=False)
+                for sampler in ("importance", "mcmc"):  # the posterior two ways, on the same data sets
+                    fits[sampler] = _fits(table, mcmc_seeds, sampler, workers, max_steps, log, warm=False)
             for method, fl in fits.items():
                 rows += [
                     {"scene": name, **r} for r in _rows(method, fl, snr, actual, bound, _motion_key(table), sc.params)
@@ -272,7 +273,7 @@ def plot_speed_error(rows: list[dict], path: Path) -> None:
     panels = (("frame", "tilt_frequency"), ("frame", "drive_frequency"), ("plate", "frequency"))
     fig, axes = plt.subplots(1, len(panels), figsize=(15, 4.5), constrained_layout=True)
     markers = {3: "v", 10: "o", 30: "^"}
-    colors = {"spectral": "C0", "sindy": "C1", "casadi": "C2", "mcmc": "C3", "map": "C4"}
+    colors = {"spectral": "C0", "sindy": "C1", "casadi": "C2", "mcmc": "C3", "map": "C4", "importance": "C5"}
     for ax, (scene, p) in zip(axes, panels):
         for r in rows:
             if (

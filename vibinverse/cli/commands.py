@@ -486,13 +486,13 @@ def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
 def _estimator_table(rows: list[dict]) -> str:
     fmt = lambda v, f: format("-", f">{f.split('.')[0]}") if v is None else format(v, f)
     lines = [
-        f"{'method':<9}{'SNR':>4} {'parameter':<20}{'bias':>11}{'rmse':>11}{'crlb_sd':>11}{'rmse/crlb':>10}"
+        f"{'method':<11}{'SNR':>4} {'parameter':<20}{'bias':>11}{'rmse':>11}{'crlb_sd':>11}{'rmse/crlb':>10}"
         f"{'cover90':>8}{'time_s':>8}{'failed':>7}"
     ]
     for r in rows:
         ratio = r["rmse"] / r["crlb_sd"] if r["rmse"] is not None and r["crlb_sd"] else None
         lines.append(
-            f"{r['method']:<9}{r['snr']:>4} {r['param'].rsplit('.', 1)[-1]:<20}{fmt(r['bias'], '11.3g')}"
+            f"{r['method']:<11}{r['snr']:>4} {r['param'].rsplit('.', 1)[-1]:<20}{fmt(r['bias'], '11.3g')}"
             f"{fmt(r['rmse'], '11.3g')}{fmt(r['crlb_sd'], '11.3g')}{fmt(ratio, '10.2f')}"
             f"{fmt(r['coverage90'], '8.2f')}{r['time_s']:8.2f}{r['n_failed']:>4}/{r['n']}"
         )
@@ -637,8 +637,9 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument(
         "--method",
         default="auto",
-        help="spectral | sindy | casadi | map | mcmc | auto (default: spectral -> SINDy (frame scenes) "
-        "-> casadi -> emcee, each seeding the next); map is a derivative-free MAP (scipy)",
+        help="spectral | sindy | casadi | map | importance | mcmc | auto (default: spectral -> SINDy (frame "
+        "scenes) -> casadi -> emcee, each seeding the next); map is a derivative-free MAP (scipy); importance: "
+        "the MAP's Laplace approximation corrected by importance sampling (PSIS), emcee when its check fails",
     )
     fit.add_argument("--seed", type=int, default=0)
     fit.add_argument(

@@ -30,7 +30,7 @@ def test_reduced_estimator_comparison_has_the_documented_rows(tmp_path):
         log=lambda *a: None,
     )
     rows = [r for r in res["rows"] if r["scene"] == "frame"]
-    assert {r["method"] for r in rows} == {"spectral", "sindy", "casadi", "mcmc"}
+    assert {r["method"] for r in rows} == {"spectral", "sindy", "casadi", "importance", "mcmc"}
     keys = {"method", "param", "snr", "bias", "rmse", "crlb_sd", "coverage90", "time_s"}
     for r in rows:
         assert keys <= set(r) and r["snr"] == 30 and r["crlb_sd"] > 0 and r["time_s"] > 0
@@ -39,6 +39,6 @@ def test_reduced_estimator_comparison_has_the_documented_rows(tmp_path):
     assert casadi[K + "drive_frequency"]["rmse"] < 4 * casadi[K + "drive_frequency"]["crlb_sd"]
     assert casadi[K + "tilt_frequency"]["rmse"] < 4 * casadi[K + "tilt_frequency"]["crlb_sd"]
     plate = {(r["method"], r["param"].rsplit(".", 1)[-1]): r for r in res["rows"] if r["scene"] == "plate"}
-    assert {m for m, _ in plate} == {"spectral", "casadi", "map", "mcmc"}
+    assert {m for m, _ in plate} == {"spectral", "casadi", "map", "importance", "mcmc"}
     assert plate["casadi", "frequency"]["rmse"] < 4 * plate["casadi", "frequency"]["crlb_sd"]
     assert plate["map", "center_deflection"]["rmse"] < 4 * plate["map", "center_deflection"]["crlb_sd"]
