@@ -61,8 +61,8 @@ def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]
     """The modal table to fit and the order search behind it (None when the table fixes the whole
     order): `modes`, `lines`, `drift` and `noise` given in the table are kept, the others chosen
     by `vibinverse.model_order.choose_order` (stepwise BIC), whose optimum seeds the fit. A whole
-    order fixed without a `start` is seeded by `model_order.fit_fixed` (its modes and lines also
-    built up one at a time, as the search would)."""
+    order of modes and lines fixed without a `start` is seeded by `model_order.fit_fixed` (its
+    modes and lines also built up one at a time, as the search would)."""
     from vibinverse.model_order import SEARCHED, choose_order, fit_fixed
 
     table = {"modal": {}} if scene is None else scene_table(scene, overrides)
@@ -76,7 +76,7 @@ def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]
 
         spec = ModalSpec.from_table(table)  # one-line errors before any work
         if all(k in modal for k in SEARCHED):
-            if "start" not in modal and (spec.modes or spec.lines):
+            if "start" not in modal and spec.modes and spec.lines:
                 modal["start"] = dict(fit_fixed(data, spec).values)
             return table, None
         order = choose_order(data, table)

@@ -905,13 +905,14 @@ def choose_order(
 def fit_fixed(series: Series, spec: ModalSpec) -> OrderFit:
     """`spec` fitted by maximum likelihood from the better (in ln L) of two starts: the spectral
     starts of the whole order (`ModalModel.guesses`: the strongest peaks of the data's spectrum),
-    and the order built up as the forward search builds it (`built_up`). With the counts given by
-    the user the search adds nothing, and the spectral starts alone missed a weak line next to a
-    resonance: with AR(1) noise the bench's weak_drive case put the line on the resonance's peak
-    (or at 25-47 Hz) and the damping ratio 3x too high, 14 below the true reading in ln L."""
+    and, when it has both modes and lines, the order built up as the forward search builds it
+    (`built_up`). With the counts given by the user the search adds nothing, and the spectral
+    starts alone missed a weak line next to a resonance: with AR(1) noise the bench's weak_drive
+    case put the line on the resonance's peak (or at 25-47 Hz) and the damping ratio 3x too high,
+    14 below the true reading in ln L."""
     model = ModalModel({"modal": spec.table()}, series)
     direct = fit_order(series, spec, model.guesses(model.default_priors()))
-    if not (spec.modes or spec.lines):
+    if not (spec.modes and spec.lines):  # one kind only: no line to hide next to a resonance
         return direct
     built = built_up(series, spec)
     if built is not None and built.log_likelihood > direct.log_likelihood:
