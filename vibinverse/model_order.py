@@ -935,7 +935,6 @@ def built_up(series: Series, spec: ModalSpec) -> OrderFit | None:
     bare = replace(spec, modes=0, lines=0)
     model = ModalModel({"modal": bare.table()}, series)
     current = fit_order(series, bare, model.guesses(model.default_priors()))
-    span = max(current.model.span, series.dt)
     while current.spec.modes < spec.modes or current.spec.lines < spec.lines:
         search = dict.fromkeys(SEARCHED, False)
         search["modes"] = current.spec.modes < spec.modes
@@ -943,20 +942,7 @@ def built_up(series: Series, spec: ModalSpec) -> OrderFit | None:
         cands = candidates(current, series, search, (spec.modes, spec.lines))
         if search["lines"]:
             cands += [c for c, _, _ in near_line_candidates(current, series)]
-        partial = [
-            (
-                c,
-                fit_order(
-                    series,
-                    c.spec,
-                    c.starts,
-                    free=[*c.new, "level", "noise.sigma", *near_modes(c, span)],
-                    maxiter=60,
-                    ftol=1e-9,
-                ),
-            )
-            for c in cands
-        ]
+        partial = [(c, partial_fit(series, current, c)) for c in cands]
         if not partial:
             return None
         c, pf = max(partial, key=lambda cp: cp[1].log_likelihood)
@@ -987,6 +973,14 @@ def near_modes(c: Candidate, span: float) -> list[str]:
     return out
 
 
+def partial_fit(series: Series, current: OrderFit, c: Candidate) -> OrderFit:
+    """A candidate fitted with only its new parameters, the level, the white noise and the modes
+    whose band reaches it (`near_modes`) free, the rest held at the current optimum (a few
+    iterations: a cheap lower bound on its gain)."""
+    keep = [*c.new, "level", "noise.sigma", *near_modes(c, current.model.span)]
+    return fit_order(series, c.spec, c.starts, free=keep, maxiter=60, ftol=1e-9)
+
+
 def _best_move(
     series: Series, current: OrderFit, cands: list[Candidate], rows: list[dict[str, Any]], step: int
 ) -> OrderFit | None:
@@ -1004,9 +998,7 @@ def _best_move(
                 )
                 rows.append(_row(step, c.what, f, current.bic, "screened out (no gain on its grid of starts)", False))
                 continue
-        keep = [*c.new, "level", "noise.sigma", *near_modes(c, current.model.span)]
-        pf = fit_order(series, c.spec, c.starts, free=keep, maxiter=60, ftol=1e-9)
-        partial.append((c, pf))
+        partial.append((c, partial_fit(series, current, c)))
     partial.sort(key=lambda cp: cp[1].bic)
     slack = 0.5 * math.log(current.n)  # a partial fit this close to a lower BIC may get there refitted
     refits = []
