@@ -157,8 +157,9 @@ def fit_series(
     progress: bool = False,
 ) -> FitResult:
     """`vibinverse.api.fit` of one series (its docstring has the options)."""
-    from vibinverse.pipeline import run
+    from vibinverse.pipeline import check_method, run
 
+    check_method(method)  # before the order search, which may take minutes
     if workers < 1 or max_steps < 1:
         raise InputError("workers and max_steps: must be >= 1")
     if resume and chain is None:

@@ -80,6 +80,12 @@ def check_observation(posterior: Posterior, spectral: FitResult) -> None:
         posterior.model.check_first_order(spectral.starts or [spectral.point])
 
 
+def check_method(method: str) -> None:
+    """InputError (one line, the allowed methods) unless `method` is one of METHODS."""
+    if method not in METHODS:
+        raise InputError(f"--method: {method!r} is not one of {', '.join(METHODS)}")
+
+
 def run(
     posterior: Posterior,
     method: str = "auto",
@@ -92,8 +98,7 @@ def run(
     progress: bool = True,
 ) -> FitResult:
     """Fit `posterior` by `method` (one of METHODS); the result's timing holds every stage's seconds."""
-    if method not in METHODS:
-        raise InputError(f"--method: {method!r} is not one of {', '.join(METHODS)}")
+    check_method(method)
     check_fit(posterior)
     if method == "sindy" and not SindyEstimator.covers(posterior):
         SindyEstimator().estimate(posterior, None)  # raises Unsupported with the reason

@@ -501,3 +501,18 @@ def test_ctrl_c_inside_an_extension_import_is_one_line_and_130(monkeypatch, caps
     )
     with pytest.raises(ImportError, match="a real import error"):
         cli.main([])
+
+
+def test_an_unknown_method_is_refused_before_the_order_search(tmp_path):
+    """A scene-less fit searches the model's order first (minutes on a long record): an unknown
+    `--method` is refused before it, in one line naming the allowed methods, exit 2, no output."""
+    t = np.arange(4000) / 200.0
+    y = np.sin(2 * np.pi * 10.0 * t) + np.random.default_rng(0).normal(size=t.size)
+    data = tmp_path / "series.csv"
+    np.savetxt(data, np.column_stack([t, y]), delimiter=",", header="time,intensity", comments="")
+    out = tmp_path / "out"
+    r = run_cli("fit", str(data), "--method", "bogus", "-o", str(out))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "--method: 'bogus' is not one of" in r.stderr and "importance" in r.stderr
+    assert "model order" not in r.stderr + r.stdout  # no search ran
+    assert not out.exists()
