@@ -80,12 +80,10 @@ from __future__ import annotations
 import logging
 import math
 import time
-import warnings
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize
 
 from vibinverse.errors import NumericalError
 from vibinverse.io.series import FEW_CYCLES, MIN_CYCLES, Series
@@ -101,6 +99,7 @@ from vibinverse.models.modal import (
     spectrum,
     wrap_phase,
 )
+from vibinverse.optimize import maximize
 from vibinverse.priors import ParameterSpace
 
 logger = logging.getLogger(__name__)
@@ -212,26 +211,13 @@ def fit_order(
         start = {n: p.inside(_wrapped(n, start.get(n, p.centre()), p.centre())) for n, p in zip(names, space.priors)}
         z0 = space.to_z(start)
 
-        def neg(zf: np.ndarray, z0=z0) -> float:
-            z = z0.copy()
-            z[pos] = zf
-            ll = model.log_likelihood(sort_labels(space.from_z(z), spec))
-            return -ll if math.isfinite(ll) else 1e300
-
-        zf0 = z0[pos]
-        scale = _preconditioner(neg, zf0)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            res = minimize(
-                lambda w, zf0=zf0, scale=scale, neg=neg: neg(zf0 + scale * w),
-                np.zeros(len(pos)),
-                method="L-BFGS-B",
-                bounds=list(zip((-30.0 - zf0) / scale, (30.0 - zf0) / scale)),
-                options={"maxiter": maxiter, "ftol": ftol, "gtol": 1e-6, "eps": 1e-6},
-            )
-        z = z0.copy()
-        z[pos] = zf0 + scale * res.x
-        ll = -float(res.fun)
+        ll, z = maximize(
+            lambda z: model.log_likelihood(sort_labels(space.from_z(z), spec)),
+            z0,
+            pos,
+            maxiter=maxiter,
+            ftol=ftol,
+        )
         if best is None or ll > best[0]:
             best = (ll, sort_labels(space.from_z(z), spec))
     if best is None or not math.isfinite(best[0]) or best[0] <= -1e299:
@@ -243,21 +229,6 @@ def _wrapped(name: str, value: float, centre: float) -> float:
     """A line's phase wrapped into the period around `centre` (its prior's window: a start past it
     is the same line, not a start to clip at the edge); any other value as it is."""
     return centre + wrap_phase(value - centre) if name.endswith(".phase") else value
-
-
-def _preconditioner(neg: Any, z: np.ndarray, h: float = 1e-3) -> np.ndarray:
-    """Per-coordinate scales 1 / sqrt(curvature) of `neg` at z (central differences; clipped to
-    [1e-6, 1]): the optimizer works in units of each parameter's width, so that a sharp frequency
-    and a broad noise level take steps of the same size (fewer iterations)."""
-    f0 = neg(z)
-    out = np.ones(z.size)
-    for i in range(z.size):
-        e = np.zeros(z.size)
-        e[i] = h
-        c = (neg(z + e) - 2.0 * f0 + neg(z - e)) / (h * h)
-        if math.isfinite(c) and c > 0:
-            out[i] = 1.0 / math.sqrt(c)
-    return np.clip(out, 1e-6, 1.0)
 
 
 @dataclass

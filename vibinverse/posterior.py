@@ -21,6 +21,9 @@ class Posterior:
         self.model = model
         self.space = ParameterSpace(free if free is not None else model.default_priors())
         model.check_free(self.space.names)
+        #: the best (ln L, values) found so far of the model without each line, by the line's label
+        #: (`vibinverse.detection.null_optimum`: the stages of one fit refine one optimum)
+        self.null_optima: dict[str, tuple[float, dict[str, float]]] = {}
 
     @property
     def series(self) -> Series:

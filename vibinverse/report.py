@@ -296,8 +296,8 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
     for det in detections(d):
         if not det.detected:
             out.append(
-                f"No {det.what} is detected: the fit with it is only {format_number(det.delta_loglike, '.1f')} in "
-                f"log-likelihood above the fit without it (the threshold is {format_number(det.threshold, '.1f')}: 5 sigma, plus the "
+                f"No {det.what} is detected: the fit with it is at most {format_number(det.delta_loglike, '.1f')} in "
+                f"log-likelihood above the best fit without it (the threshold is {format_number(det.threshold, '.1f')}: 5 sigma, plus the "
                 "look-elsewhere term of a free frequency). Its numbers below are not a detection."
             )
     if draws is not None and draws.shape[0] > 10:
