@@ -25,7 +25,11 @@ coloured noise removed; AR(1) and 1/f exchanged; a coloured noise and a random-w
 an additive drift and a gain drift exchanged, both of which explain a changing level; a mode or
 a line of under 3 cycles in the record, or a mode of damping > 0.5, exchanged for a drift or a gain
 drift): the greedy forward step may take a heavily damped low-frequency mode, or a slow AR(1), for
-what is AR(1) noise, or a drift, and the stepwise search undoes it. When no move lowers the BIC,
+what is AR(1) noise, or a drift, and the stepwise search undoes it. Beside a coloured noise the
+white noise too must earn its place (removed, and proposed back as a forward candidate): coloured
+sensor noise alone (AR(1), phi 0.9) leaves sigma unidentified, flat in ln sigma over ten units down
+to its prior's bound, which cost emcee 9,500 steps and the importance sampler its Pareto check
+(k 0.8). When no move lowers the BIC,
 each line of under 3 cycles left is read two ways (`slow_reading`): as the line it is, and as a
 gain 1 + s / level of the same curve s, which gives the same mean but makes the other modes' and
 lines' amplitudes follow s. Over so few cycles nothing else tells a slow vibration from a slow
@@ -54,7 +58,8 @@ searched next to the mode), it is reported as ambiguous with the resonance's val
 `vi.fit` adds that order's 90 % intervals (the bench's weak_drive case: the resonance 1.8 % off
 without the 4 Hz line, 0.1 % with it).
 It stops when nothing changes, or at the caps (6 modes, 6 lines). A component the user fixes
-(`modes`, `lines`, `drift`, `noise` or `gain` in the `modal` table) is not searched.
+(`modes`, `lines`, `drift`, `noise` or `gain` in the `modal` table) is not searched; the white
+noise is searched only with the coloured noise (and not when `white` is given).
 
 Why BIC: it is a consistent criterion for the order (the probability of choosing the true order
 goes to 1 as n grows, where AIC keeps a fixed chance of adding spurious components), and its
@@ -265,7 +270,7 @@ def candidates(
     v = innovations(fit)
     vf, vp = spectrum(v, dt, model.t)
     floor = float(np.median(vp[band])) / math.log(2.0)
-    sigma = values["noise.sigma"]
+    sigma = noise_rms(values)
     if search["modes"] and spec.modes < caps[0] and band.any():
         sm = smooth(power, 7)
         i = int(np.flatnonzero(band)[np.argmax(sm[band])])
@@ -315,9 +320,20 @@ def candidates(
             for c in (0.1, 0.3, 0.9)
         ]
         out.append(Candidate("1/f noise", replace(spec, noise="1/f"), grid, ["flicker.rms", "flicker.corner"]))
+    if search.get("white") and not spec.white:
+        grid = [{**values, "noise.sigma": c * sigma} for c in (0.03, 0.1, 0.3)]
+        out.append(Candidate("white noise", replace(spec, white=True), grid, ["noise.sigma"]))
     if search["gain"] and not spec.gain:
         out.append(gain_candidate(model, values, spec))
     return out
+
+
+def noise_rms(values: dict[str, float]) -> float:
+    """The white noise's sigma, or without white noise the coloured noise's rms: the noise's scale."""
+    for name in ("noise.sigma", "ar.rms", "flicker.rms"):
+        if name in values:
+            return values[name]
+    raise KeyError("noise.sigma")
 
 
 def split_candidates(spec: ModalSpec, values: dict[str, float], nyq: float) -> list[Candidate]:
@@ -385,7 +401,8 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
     low-frequency mode and AR(1) noise, describe much the same spectrum, and the greedy forward
     step may have taken the wrong one first."""
     spec, values = fit.spec, fit.values
-    sigma = values["noise.sigma"]
+    sigma = noise_rms(values)
+    with_white = {"noise.sigma": sigma, **values}  # a start that brings the white noise back
     span = max(fit.model.span, series.dt)
     out: list[Candidate] = []
     nuisance = [
@@ -395,6 +412,7 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
         "flicker.rms",
         "flicker.corner",
         *gain_names(max(GAIN_TERMS, spec.gain)),
+        "noise.sigma",
     ]
 
     def move(what: str, new_spec: ModalSpec, starts: list[dict[str, float]]) -> Candidate:
@@ -454,7 +472,7 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
     if search["drift"] and spec.drift != "none":
         out.append(move("remove the drift", replace(spec, drift="none"), [dict(values)]))
     if search["noise"] and spec.noise != "white":
-        out.append(move(f"remove the {spec.noise} noise", replace(spec, noise="white"), [dict(values)]))
+        out.append(move(f"remove the {spec.noise} noise", replace(spec, noise="white", white=True), [with_white]))
         other = "1/f" if spec.noise == "ar1" else "ar1"
         starts = (
             [
@@ -468,6 +486,9 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
             ]
         )
         out.append(move(f"{spec.noise} noise exchanged for {other} noise", replace(spec, noise=other), starts))
+        if search.get("white") and spec.white:
+            # AR(1) alone (the sensor's noise coloured) leaves sigma flat down to its prior's bound
+            out.append(move("remove the white noise", replace(spec, white=False), [dict(values)]))
     if search["gain"] and spec.gain:
         out.append(move("remove the gain drift", replace(spec, gain=0), [dict(values)]))
         if search["drift"] and spec.drift == "none":
@@ -481,11 +502,11 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
     if search["noise"] and search["drift"]:
         rms = values.get("ar.rms", values.get("flicker.rms", sigma))
         if spec.noise != "white" and spec.drift == "none":
-            start = {**values, "drift.rate": rms / math.sqrt(span)}
+            start = {**with_white, "drift.rate": rms / math.sqrt(span)}
             out.append(
                 move(
                     f"{spec.noise} noise exchanged for a random-walk drift",
-                    replace(spec, noise="white", drift="walk"),
+                    replace(spec, noise="white", drift="walk", white=True),
                     [start],
                 )
             )
@@ -843,8 +864,9 @@ def choose_order(
     searched); None searches all. Returns the chosen fit and the criterion table."""
     t0 = time.perf_counter()
     fixed = dict((table or {}).get("modal") or {})
-    spec = ModalSpec.from_table({"modal": {k: fixed[k] for k in SEARCHED if k in fixed}})
+    spec = ModalSpec.from_table({"modal": {k: fixed[k] for k in (*SEARCHED, "white") if k in fixed}})
     search = {k: k not in fixed for k in SEARCHED}
+    search["white"] = search["noise"] and "white" not in fixed
     current = fit_fixed(series, spec)
     rows: list[dict[str, Any]] = [_row(0, "start: " + _describe(spec), current, None, "full", True)]
     logger.info("model order: %s, BIC %.1f", _describe(spec), current.bic)
@@ -994,7 +1016,7 @@ def _describe(spec: ModalSpec) -> str:
     parts = [f"{spec.modes} modes", f"{spec.lines} lines"]
     if spec.drift != "none":
         parts.append(f"{spec.drift} drift")
-    parts.append(f"{spec.noise} noise")
+    parts.append(f"{spec.noise} noise" + ("" if spec.white else " without white noise"))
     if spec.gain:
         parts.append(f"gain drift ({spec.gain} cosines)")
     return ", ".join(parts)
@@ -1010,6 +1032,7 @@ def _row(step: int, what: str, fit: OrderFit, before: float | None, refit: str, 
         "drift": fit.spec.drift,
         "noise": fit.spec.noise,
         "gain": fit.spec.gain,
+        "white": fit.spec.white,
         "k": fit.k,
         "log_likelihood": float(fit.log_likelihood),
         "bic": float(fit.bic),

@@ -220,6 +220,29 @@ def test_ar1_noise_and_one_mode():
     assert freqs(res)[0] == pytest.approx(2.3, rel=0.02)
     ar = next(c for c in res.components if c["kind"] == "coloured noise")
     assert math.exp(-1 / (FS * ar["time"])) == pytest.approx(0.9, abs=0.03)  # phi = exp(-dt / time)
+    # the white noise (0.3 beside AR(1) of rms 1) earns its place: its removal was tried and lost
+    assert res.spec.white
+    assert next(c for c in res.components if c["kind"] == "white noise")["sigma"] == pytest.approx(0.3, rel=0.25)
+    removal = [r for r in res.criterion if r["tried"] == "remove the white noise"]
+    assert removal and not any(r["kept"] for r in removal) and min(r["delta_bic"] for r in removal) > 10
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_coloured_noise_alone_is_not_given_a_white_noise_it_cannot_identify(seed):
+    """AR(1) sensor noise with no white noise under it (the robustness bench's ar1 case): sigma is
+    flat in ln sigma down to its prior's bound (not identified), so the search removes the white
+    noise and reports the order without it; the mode and the AR(1) term are as simulated (phi
+    within 0.03, rms within 10 %: 3000 samples with tau ~10 samples, ~300 independent ones)."""
+    t, y = simulate(3000, modes=[(2.3, 0.02, 0.6)], sigma=0.0, ar=(0.9, 1.0), seed=seed)
+    res = choose_order(vi.series(t, y))
+    assert (res.spec.modes, res.spec.noise, res.spec.white) == (1, "ar1", False)
+    assert "noise.sigma" not in res.fit.values and res.table()["modal"]["white"] is False
+    assert "white noise" not in {c["kind"] for c in res.components}
+    assert [r["kept"] for r in res.criterion if r["tried"] == "remove the white noise"][-1]
+    assert freqs(res)[0] == pytest.approx(2.3, rel=0.02)
+    ar = next(c for c in res.components if c["kind"] == "coloured noise")
+    assert math.exp(-1 / (FS * ar["time"])) == pytest.approx(0.9, abs=0.03)
+    assert ar["rms"] == pytest.approx(1.0, rel=0.1)
 
 
 def test_random_walk_drift_and_one_mode():

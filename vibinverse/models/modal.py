@@ -20,7 +20,10 @@ and nuisance terms, all in one Kalman filter (`ModalModel`, registered as "modal
   term whose upper corner was fixed at 100 cycles per record (5 Hz on 20 s) left the shoulder of
   noise with a 16 Hz corner to a false broad "mode"; one fixed at Nyquist under-predicted the noise
   near a 3.5 Hz mode of such data, which widened (damping ratios 2x too large).
-- e: white sensor noise (`noise.sigma`).
+- e: white sensor noise (`noise.sigma`); absent (`white` false) only beside a coloured noise c,
+  which then is the whole noise: where AR(1) noise alone describes the data, sigma is not
+  identified (flat in ln sigma down to its prior's bound: emcee took 9,500 steps, 39 s, on 4,000
+  samples, and PSIS refused the Laplace proposal), so the order search removes it there.
 - g: a multiplicative gain drift (a cloud dims the whole signal, the vibration included; `gain`
   J > 0 cosines, `gain.a1` .. `gain.aJ`): g(t) = sum_j a_j cos(pi j u), u = (t - t0) / span, from
   0.5 to J / 2 cycles per record (J = 6 by default: a smooth change over the record). Given the
@@ -51,7 +54,8 @@ the modes' frequencies are strictly increasing, and the lines' too (a sorted-fre
 the priors of all modes are the same window, lo..Nyquist). Mode 0 is always the lowest.
 
 The table: `{"modal": {"modes": 3, "lines": 0, "drift": True, "noise": "ar1"}}`; `drift` is False
-(none), True or "walk", or "integrated"; `noise` is "white", "ar1" or "1/f". Optional
+(none), True or "walk", or "integrated"; `noise` is "white", "ar1" or "1/f"; `white` is True
+(default) or False (no white sensor noise: only beside "ar1" or "1/f"). Optional
 `"start": {name: value}` is the first starting point (the order search writes its optimum there),
 and `"values": {name: value}` the values of parameters that are not free (default: the start,
 else the first spectral guess).
@@ -100,13 +104,20 @@ _LOG_2PI = math.log(2.0 * math.pi)
 @dataclass(frozen=True)
 class ModalSpec:
     """The model's order: K modes, L lines, the drift ("none", "walk", "integrated"), the
-    coloured noise ("white", "ar1", "1/f") and the gain drift's number of cosines (0: none)."""
+    coloured noise ("white", "ar1", "1/f"), the gain drift's number of cosines (0: none), and
+    whether the white sensor noise is there (`white`; False only beside a coloured noise, which
+    then describes the noise alone: `noise.sigma` is not a parameter)."""
 
     modes: int = 0
     lines: int = 0
     drift: str = "none"
     noise: str = "white"
     gain: int = 0
+    white: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.white and self.noise == "white":
+            raise SceneError("modal.white: false needs a coloured noise (noise = 'ar1' or '1/f') in its place")
 
     @classmethod
     def from_table(cls, table: dict[str, Any]) -> ModalSpec:
@@ -116,10 +127,11 @@ class ModalSpec:
             m = {}
         if not isinstance(m, dict):
             raise SceneError("modal: must be a table, e.g. {modes = 2, lines = 0, drift = true, noise = 'ar1'}")
-        unknown = set(m) - {"modes", "lines", "drift", "noise", "gain", "values", "start"}
+        unknown = set(m) - {"modes", "lines", "drift", "noise", "gain", "white", "values", "start"}
         if unknown:
             raise SceneError(
-                f"modal.{sorted(unknown)[0]}: unknown key; allowed: modes, lines, drift, noise, gain, values, start"
+                f"modal.{sorted(unknown)[0]}: unknown key; allowed: modes, lines, drift, noise, gain, white, values, "
+                "start"
             )
         out = {}
         for key in ("modes", "lines"):
@@ -144,7 +156,10 @@ class ModalSpec:
             gain = 0
         if isinstance(gain, bool) or not isinstance(gain, (int, np.integer)) or not 0 <= int(gain) <= 24:
             raise SceneError(f"modal.gain: {m.get('gain')!r}; allowed: false, true ({GAIN_TERMS} cosines) or 0..24")
-        return cls(out["modes"], out["lines"], drift, noise, int(gain))
+        white = m.get("white", True)
+        if not isinstance(white, (bool, np.bool_)):
+            raise SceneError(f"modal.white: {white!r}; allowed: true, or false beside noise = 'ar1' or '1/f'")
+        return cls(out["modes"], out["lines"], drift, noise, int(gain), bool(white))
 
     def table(self) -> dict[str, Any]:
         """The `modal` sub-table of this order."""
@@ -154,6 +169,7 @@ class ModalSpec:
             "drift": self.drift != "none" and self.drift,
             "noise": self.noise,
             "gain": self.gain,
+            "white": self.white,
         }
 
     def names(self) -> list[str]:
@@ -170,7 +186,8 @@ class ModalSpec:
         elif self.noise == "1/f":
             out += ["flicker.rms", "flicker.corner"]
         out += gain_names(self.gain)
-        out.append("noise.sigma")
+        if self.white:
+            out.append("noise.sigma")
         return out
 
 
@@ -815,7 +832,7 @@ class ModalModel(SignalModel):
         _lines_mean(self.t, float(v("level")), f, a, ph, mean)
         if s.gain:
             mean *= self.multiplier(values)
-        return mean, phis, qs, float(v("noise.sigma")) ** 2, p0
+        return mean, phis, qs, float(v("noise.sigma")) ** 2 if s.white else 0.0, p0
 
     def multiplier(self, values: dict[str, float]) -> np.ndarray:
         """1 + g(t) at the stamps (the gain drift; module docstring), or an empty array without one
@@ -1020,7 +1037,8 @@ class ModalModel(SignalModel):
             out["flicker.corner"] = Prior("loguniform", (min(FLICKER_LOWEST_CORNER / span, 0.1 * nyq), nyq))
         for n in gain_names(self.spec.gain):
             out[n] = Prior("uniform", (-GAIN_LIMIT, GAIN_LIMIT))
-        out["noise.sigma"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
+        if self.spec.white:
+            out["noise.sigma"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
         return out
 
     def _spectral_guesses(self) -> list[dict[str, float]]:
@@ -1192,7 +1210,8 @@ class ModalModel(SignalModel):
                     "coefficients": [v(n) for n in gain_names(s.gain)],
                 }
             )
-        out.append({"kind": "white noise", "sigma": v("noise.sigma")})
+        if s.white:
+            out.append({"kind": "white noise", "sigma": v("noise.sigma")})
         return out
 
 

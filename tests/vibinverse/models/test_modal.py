@@ -241,6 +241,42 @@ def test_gain_drift_likelihood_is_the_dense_gaussian(jitter):
         ModalModel(spec1, s, gain_shapes=np.vstack([g, g]))
 
 
+@pytest.mark.parametrize("jitter", [0.0, 0.2])
+def test_coloured_noise_without_white_noise_is_the_dense_gaussian(jitter):
+    """`white` false: y = level + mode + line + AR(1), no sensor noise (r = 0 in the filter), against
+    the dense Gaussian from closed-form autocovariances (1e-9 relative), on uniform and jittered
+    stamps with gaps; equal to the model with white noise at sigma = 0; noise.sigma is no parameter
+    then, and `white` false without a coloured noise is refused, naming the key."""
+    from scipy.stats import multivariate_normal
+
+    s = series_of(n=160, gaps=0.05, jitter=jitter)
+    table = {"modes": 1, "lines": 1, "noise": "ar1"}
+    m = ModalModel({"modal": {**table, "white": False}}, s)
+    values = {**MODE_AND_LINE, "ar.rms": 0.3, "ar.time": 0.4}
+    assert set(values) == m.fittable() == set(m.default_priors())
+    assert m.spec == ModalSpec(1, 1, noise="ar1", white=False) and m.spec.table()["white"] is False
+    t, y = s.time, s.intensity
+    mean = 2.0 + 0.5 * np.cos(2 * np.pi * 2.1 * t + 0.3)
+    cov = sho_covariance(t, 1.3, 0.04, 0.6) + 0.3**2 * np.exp(-np.abs(t[:, None] - t[None, :]) / 0.4)
+    ok = np.isfinite(y)
+    ref = multivariate_normal(mean[ok], cov[np.ix_(ok, ok)]).logpdf(y[ok])
+    assert m.log_likelihood(values) == pytest.approx(ref, rel=1e-9)
+    with_white = ModalModel({"modal": table}, s)
+    assert with_white.log_likelihood({**values, "noise.sigma": 0.0}) == pytest.approx(ref, rel=1e-9)
+    assert "white noise" not in {c["kind"] for c in m.components(values)}
+    # two states without white noise (a walk and an AR(1) state: the two-state kernel) against the numpy filter
+    walk = ModalModel({"modal": {"lines": 1, "drift": True, "noise": "ar1", "white": False}}, s)
+    wv = {k: v for k, v in values.items() if not k.startswith("modes")} | {"drift.rate": 0.05}
+    mu, phis, qs, r, p0 = walk.tables(wv)
+    assert phis.shape[1:] == (2, 2) and r == 0.0
+    ref2 = log_likelihood_steps_reference(y - mu, phis, qs, walk.idx, walk.h, r, p0)
+    assert walk.log_likelihood(wv) == pytest.approx(ref2, rel=1e-10)
+    with pytest.raises(vi.SceneError, match=r"modal\.white: false needs a coloured noise"):
+        ModalSpec.from_table({"modal": {"modes": 1, "white": False}})
+    with pytest.raises(vi.SceneError, match=r"modal\.white: 'no'"):
+        ModalSpec.from_table({"modal": {"noise": "ar1", "white": "no"}})
+
+
 def test_gain_drift_replicates_have_the_modulated_variance():
     """Replicates with a gain drift: the modes' part times 1 + g, the AR(1) and white noise not:
     over 200 replicates the variance at the ends (g = +-0.3 there) is (1 + g)^2 rms^2 + ar^2 + sigma^2
