@@ -245,6 +245,18 @@ def test_coloured_noise_alone_is_not_given_a_white_noise_it_cannot_identify(seed
     assert ar["rms"] == pytest.approx(1.0, rel=0.1)
 
 
+def test_the_quantization_of_a_coarse_adc_is_white_noise_the_data_measure():
+    """The same AR(1)-only data read by a coarse ADC (steps of 0.8: a dim pixel's few counts): the
+    rounding is white noise of sd 0.8 / sqrt(12) = 0.23, which the search keeps and measures (within
+    15 %: ~3000 samples, with the AR(1) term sharing the high frequencies)."""
+    t, y = simulate(3000, modes=[(2.3, 0.02, 0.6)], sigma=0.0, ar=(0.9, 1.0), seed=0)
+    res = choose_order(vi.series(t, np.round(y / 0.8) * 0.8))
+    assert (res.spec.modes, res.spec.noise, res.spec.white) == (1, "ar1", True)
+    white = next(c for c in res.components if c["kind"] == "white noise")
+    assert white["sigma"] == pytest.approx(0.8 / math.sqrt(12), rel=0.15)
+    assert freqs(res)[0] == pytest.approx(2.3, rel=0.02)
+
+
 def test_random_walk_drift_and_one_mode():
     t, y = simulate(3000, modes=[(2.3, 0.02, 0.6)], sigma=0.5, drift=0.3, seed=0)
     res = choose_order(vi.series(t, y))
