@@ -277,6 +277,29 @@ def test_coloured_noise_without_white_noise_is_the_dense_gaussian(jitter):
         ModalSpec.from_table({"modal": {"noise": "ar1", "white": "no"}})
 
 
+@given(
+    modes=st.integers(0, 20),
+    lines=st.integers(0, 20),
+    drift=st.sampled_from(["none", "walk", "integrated"]),
+    noise=st.sampled_from(["white", "ar1", "1/f"]),
+    gain=st.integers(0, 24),
+    white=st.booleans(),
+)
+@settings(max_examples=200, deadline=None)
+def test_every_order_survives_its_table_and_names_its_noise(modes, lines, drift, noise, gain, white):
+    """For all orders: the table an order writes reads back as the same order, and `noise.sigma`
+    is a parameter exactly when the white noise is there; no white noise without a coloured one."""
+    if not white and noise == "white":
+        with pytest.raises(SceneError, match=r"modal\.white"):
+            ModalSpec(modes, lines, drift, noise, gain, white)
+        return
+    spec = ModalSpec(modes, lines, drift, noise, gain, white)
+    assert ModalSpec.from_table({"modal": spec.table()}) == spec
+    names = spec.names()
+    assert ("noise.sigma" in names) is white and len(names) == len(set(names))
+    assert len(names) == 1 + 3 * (modes + lines) + (drift != "none") + 2 * (noise != "white") + gain + white
+
+
 def test_gain_drift_replicates_have_the_modulated_variance():
     """Replicates with a gain drift: the modes' part times 1 + g, the AR(1) and white noise not:
     over 200 replicates the variance at the ends (g = +-0.3 there) is (1 + g)^2 rms^2 + ar^2 + sigma^2
