@@ -118,9 +118,11 @@ def fit(
     (`vibinverse.imaging.joint_fit.fit_pixels`, whose options `cube_options` passes on:
     displacement, scale, band, reference).
 
-    method: spectral | sindy | casadi | map | mcmc | auto (spectral -> SINDy -> casadi -> emcee,
-    each seeding the next). `chain` is the emcee checkpoint (HDF5; `resume` continues it); without
-    it the sampler checkpoints to a temporary file that is removed afterwards.
+    method: spectral | sindy | casadi | map | importance | mcmc | auto (spectral -> SINDy -> casadi
+    -> emcee, each seeding the next; the modal model, and records of over 20,000 samples, by
+    importance sampling of the Laplace approximation in place of emcee, emcee where its check fails).
+    `chain` is the emcee checkpoint (HDF5; `resume` continues it); without it the sampler
+    checkpoints to a temporary file that is removed afterwards.
 
     Without a scene (or with a `{"modal": {"modes": 2, ...}}` table) the series is fitted with the
     modal model: resonances, lines, drift and coloured noise, the order not fixed by the table

@@ -1,8 +1,10 @@
 """The fitting pipeline: spectral -> SINDy -> MAP (casadi, else scipy) -> emcee, each stage seeding
 the next; `--method` stops it at a stage. A record longer than LONG_RECORD samples finds its MAP over
-growing stretches (`stretched_map`). A record of more than IMPORTANCE_RECORD samples has its
-posterior by default by importance sampling of the Laplace approximation (`estimators.importance`),
-emcee only when that fails its check; `importance` asks for that stage on a record of any length.
+growing stretches (`stretched_map`). A record of more than IMPORTANCE_RECORD samples, and any
+record of a model that asks for it (`SignalModel.importance_first`: the scene-less modal model),
+has its posterior by default by importance sampling of the Laplace approximation
+(`estimators.importance`), emcee only when that fails its check; `importance` asks for that stage
+on a record of any length, `mcmc` for emcee.
 
 A stage that fails is recorded and the chain goes on: a declined SINDy leaves the MAP to start from
 the spectral candidates, and a casadi MAP that does not cover the model or fails falls back to the
@@ -122,7 +124,9 @@ def run(
     if method in ("map", "casadi"):
         best.timing = timing
         return best
-    if method == "importance" or (method == "auto" and posterior.series.time.size > IMPORTANCE_RECORD):
+    if method == "importance" or (
+        method == "auto" and (posterior.series.time.size > IMPORTANCE_RECORD or posterior.model.importance_first)
+    ):
         try:
             result = LaplaceImportance().fit(posterior, best, seed=seed, workers=workers)
         except Unsupported as exc:

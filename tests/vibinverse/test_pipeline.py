@@ -222,9 +222,10 @@ def test_a_long_record_s_default_fit_importance_samples_its_laplace_approximatio
 
 @pytest.mark.slow
 def test_importance_sampling_gives_emcee_s_intervals_on_a_three_mode_record():
-    """Past IMPORTANCE_RECORD samples the default fit importance-samples the Laplace approximation
-    instead of running emcee (2000 calls against ~20 000: a 36 000-sample three-mode record's fit
-    took 67 s instead of 141 s); `--method importance` asks for it at any length. On the three-mode
+    """Past IMPORTANCE_RECORD samples, and for the modal model at any length, the default fit
+    importance-samples the Laplace approximation instead of running emcee (2000 calls against
+    ~20 000: a 36 000-sample three-mode record's fit took 67 s instead of 141 s); `--method
+    importance` asks for it at any length, `--method mcmc` for emcee. On the three-mode
     ambient case (4000 samples) the check passes and every 90 % interval's ends and median are emcee's to 0.12 of the
     interval's width: the quantiles' Monte Carlo error is ~0.02 of the width at 1000 effective draws
     (emcee's ~0.015 at 2000), so 0.12 is 4 standard errors of their difference. The Laplace
@@ -240,8 +241,11 @@ def test_importance_sampling_gives_emcee_s_intervals_on_a_three_mode_record():
     assert fast["approximation"] == "importance" and "mcmc_s" not in fast["timing"]
     assert fast["method"] == "importance"
     assert fast["diagnostics"]["psis_khat"] < 0.7 and fast["diagnostics"]["importance_ess"] >= 400
-    assert data.time.size <= pipeline.IMPORTANCE_RECORD  # the default fit of this record runs emcee
-    sampled = vi.fit(s).summary()
+    assert data.time.size <= pipeline.IMPORTANCE_RECORD  # short: the modal model asks for it
+    default = vi.fit(s).summary()
+    assert default["method"] == "auto" and default["approximation"] == "importance"
+    assert default["parameters"] == fast["parameters"]  # the same stage, the same seed
+    sampled = vi.fit(s, method="mcmc").summary()
     assert "mcmc_s" in sampled["timing"] and sampled["diagnostics"]["converged"]
     assert set(fast["parameters"]) == set(sampled["parameters"])
     for name, p in sampled["parameters"].items():

@@ -638,8 +638,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--method",
         default="auto",
         help="spectral | sindy | casadi | map | importance | mcmc | auto (default: spectral -> SINDy (frame "
-        "scenes) -> casadi -> emcee, each seeding the next); map is a derivative-free MAP (scipy); importance: "
-        "the MAP's Laplace approximation corrected by importance sampling (PSIS), emcee when its check fails",
+        "scenes) -> casadi -> emcee, each seeding the next; without a scene, and past 20,000 samples, importance "
+        "in place of emcee); map is a derivative-free MAP (scipy); importance: the MAP's Laplace approximation "
+        "corrected by importance sampling (PSIS), emcee when its check fails",
     )
     fit.add_argument("--seed", type=int, default=0)
     fit.add_argument(

@@ -55,6 +55,10 @@ class SignalModel(ABC):
     #: the likelihood spends most of its time in compiled kernels that release the GIL (numba
     #: nogil), so the sampler's walkers are evaluated by threads (no fork, no pickling)
     releases_gil: ClassVar[bool] = False
+    #: the default fit (`auto`) takes the posterior by importance sampling of the Laplace
+    #: approximation (`estimators.importance`), emcee only when its check fails, at any record
+    #: length (otherwise only past `pipeline.IMPORTANCE_RECORD` samples)
+    importance_first: ClassVar[bool] = False
 
     series: Series
     base: dict[str, Any]
