@@ -412,12 +412,12 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
         "flicker.rms",
         "flicker.corner",
         *gain_names(max(GAIN_TERMS, spec.gain)),
-        "noise.sigma",
     ]
 
     def move(what: str, new_spec: ModalSpec, starts: list[dict[str, float]]) -> Candidate:
         names = set(new_spec.names())
-        return Candidate(what, new_spec, starts, [n for n in nuisance if n in names])
+        back = ["noise.sigma"] if new_spec.white and not spec.white else []  # the white noise brought back
+        return Candidate(what, new_spec, starts, [n for n in nuisance if n in names] + back)
 
     if search["modes"]:
         for i in range(spec.modes):
