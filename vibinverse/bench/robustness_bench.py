@@ -8,7 +8,7 @@ The cases and their simulator are in `robustness_cases`, what the data can decid
 Fitters (`Fitter`: `name`, `fit(t, y, order=None) -> FitOutcome`):
 
 - ours (`ModalFitter`): the scene-less modal model through the public API, the order chosen from
-  the data by BIC (`vi.fit(vi.series(t, y), None, method=...)`), and "ours-fixed", the order an
+  the data by BIC (`vi.fit(vi.series(t, y), None, method="auto")`: what a user gets, importance-sampled Laplace with emcee where its check fails; the outcome records which formed the intervals), and "ours-fixed", the order an
   analyst expects (`{"modal": {"modes": K, "lines": L, "drift": True, "noise": "ar1"}}`);
 - the peers (`robustness_peers`): celerite2, celerite2-ou and SSI-cov.
 
@@ -38,6 +38,7 @@ import importlib.util
 import logging
 import math
 import time
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -69,7 +70,7 @@ class ModalFitter:
     """Ours: `vi.fit` with the scene-less modal model; `fixed` False chooses the order by BIC (no
     scene), True fits the analyst's order with drift and AR(1) noise."""
 
-    method: str = "map"
+    method: str = "auto"
     fixed: bool = False
     noise: str = "ar1"
     name: str = ""
@@ -102,10 +103,11 @@ def outcome_from_summary(summary: dict[str, Any]) -> FitOutcome:
     detection tests `mode_{i}_detected`, `line_{j}_detected` of the diagnostics (a component with
     no test counts as claimed). Where the fit reports that a resonance's values depend on a line the
     data cannot decide (an ambiguous reading with `intervals`), its intervals are the union of the
-    two readings': what the report tells the analyst."""
+    two readings': what the report tells the analyst. `posterior` is the summary's approximation
+    ("importance", "laplace"), or "emcee" where the fit has posterior draws."""
     p = summary["parameters"]
     diag = summary.get("diagnostics", {})
-    out = FitOutcome()
+    out = FitOutcome(posterior=str(summary.get("approximation") or "emcee"))  # no approximation: draws of emcee
     i = 0
     while f"modes[{i}].frequency" in p:
         out.frequencies.append(float(p[f"modes[{i}].frequency"]["median"]))
@@ -136,7 +138,7 @@ FITTERS = ("ours", "ours-fixed", "celerite2", "celerite2-ou", "ssi-cov")
 QUICK_FITTERS = ("ours", "celerite2", "ssi-cov")
 
 
-def available_fitters(names: Sequence[str] | None = None, method: str = "map") -> tuple[list[Fitter], dict[str, str]]:
+def available_fitters(names: Sequence[str] | None = None, method: str = "auto") -> tuple[list[Fitter], dict[str, str]]:
     """(the fitters that can run, {name: why not} of those skipped). Names: ours, ours-fixed,
     celerite2, celerite2-ou (with an Ornstein-Uhlenbeck noise term), ssi-cov (default: all)."""
     names = list(names) if names is not None else list(FITTERS)
@@ -362,7 +364,7 @@ def run(
     cases: Sequence[str] | None = None,
     fitters: Sequence[str] | Sequence[Fitter] | None = None,
     workers: int = 2,
-    method: str = "map",
+    method: str = "auto",
     seed0: int = 0,
     log=LOG,
     with_oracle: bool = True,
@@ -438,6 +440,9 @@ def _case_rows(case: str, fitters: Sequence[Fitter], per: list[list[dict]], note
         new = score(case, f.name, [x["truth"] for x in fits], outcomes)
         rows += new
         notes.update(f"{f.name} on {case}: {o.note}" for o in outcomes if o.note and not o.failed)
+        kinds = Counter(o.posterior for o in outcomes if o.posterior and not o.failed)
+        if len(kinds) > 1:  # e.g. importance sampling with emcee where its check failed
+            notes.add(f"{f.name} on {case}: intervals by " + ", ".join(f"{k} in {v}" for k, v in kinds.most_common()))
         fails = sorted({o.note for o in outcomes if o.failed})
         if fails:
             notes.add(f"{f.name} on {case}: {len(fails)} kind(s) of failure: {'; '.join(fails[:3])}")

@@ -24,7 +24,9 @@ class FitOutcome:
     """What a fitter reports: mode frequencies and damping ratios, line frequencies and amplitudes
     (each in the fitter's own order), 90 % intervals (q05, q95) by name (`modes[i].frequency`,
     `modes[i].damping_ratio`, `lines[j].frequency`, `lines[j].amplitude`) where it has them, which
-    components passed its detection test, the wall time, and whether it failed (with a note)."""
+    components passed its detection test, what formed the intervals (`posterior`: "emcee",
+    "importance", "laplace", ...; "" where the fitter does not say), the wall time, and whether it
+    failed (with a note)."""
 
     frequencies: list[float] = field(default_factory=list)
     damping_ratios: list[float] = field(default_factory=list)
@@ -33,6 +35,7 @@ class FitOutcome:
     intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
     lines_detected: list[bool] = field(default_factory=list)
     modes_detected: list[bool] = field(default_factory=list)
+    posterior: str = ""
     seconds: float = 0.0
     failed: bool = False
     note: str = ""

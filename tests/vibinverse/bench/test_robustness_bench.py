@@ -145,6 +145,8 @@ def test_outcome_from_a_modal_summary():
     assert o.line_frequencies == [10.0] and o.line_amplitudes == [0.15]
     assert o.intervals["modes[0].frequency"] == (3.3, 3.5) and "modes[1].frequency" not in o.intervals
     assert "noise.sigma" not in o.intervals
+    assert o.posterior == "emcee"  # no approximation named: the intervals are of emcee's draws
+    assert rb.outcome_from_summary({**summary, "approximation": "importance"}).posterior == "importance"
     # a resonance whose values depend on an undecided line: the union of the two readings' intervals
     summary["diagnostics"]["ambiguous"] = [
         {"alternative": "a line", "intervals": {"modes[0].frequency": [3.2, 3.45], "lines[1].frequency": [4, 4.1]}},
@@ -223,6 +225,33 @@ def test_run_table_and_plot_with_a_hand_made_fitter(tmp_path):
     assert len(text.splitlines()) == 1 + len(res["rows"])
     rb.plot(res["rows"], tmp_path / "robustness.png")
     assert (tmp_path / "robustness.png").read_bytes()[:4] == b"\x89PNG"
+
+
+class _Mixed(_Fake):
+    """The fake fitter whose odd seeds' intervals came from emcee (an importance check that failed)."""
+
+    name = "mixed"
+    calls = 0
+
+    def fit(self, t, y, order=None):
+        out = super().fit(t, y, order)
+        out.posterior = "emcee" if self.calls % 2 else "importance"
+        self.calls += 1
+        return out
+
+
+def test_run_notes_where_the_intervals_came_from_two_estimators():
+    res = rb.run(
+        quick=True, n=3, cases=["clean"], fitters=[_Fake(), _Mixed()], workers=1, log=lambda *a: None, with_oracle=False
+    )
+    assert "mixed on clean: intervals by importance in 2, emcee in 1" in res["notes"]
+    assert not any(n.startswith("fake") for n in res["notes"])  # one kind (none named): nothing to note
+    assert [f["outcome"]["posterior"] for f in res["fits"] if f["method"] == "mixed"] == [
+        "importance",
+        "emcee",
+        "importance",
+    ]
+    assert res["settings"]["method_ours"] == "auto"  # ours as a user fits: the default method
 
 
 def test_run_without_the_oracle_leaves_its_columns_empty():
