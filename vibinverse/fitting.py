@@ -82,6 +82,8 @@ def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]
         order = choose_order(data, table)
     chosen = order.table()["modal"]
     table["modal"] = {**chosen, **{k: v for k, v in modal.items() if k in ("values",)}}
+    if "windows" in modal:  # the user's line windows first (`ModalModel.line_window` takes the first holding a line)
+        table["modal"]["windows"] = [*modal["windows"], *chosen.get("windows", [])]
     if "start" in modal:
         table["modal"]["start"] = {**chosen["start"], **modal["start"]}
     return table, order
@@ -126,6 +128,7 @@ def reading_intervals(post: Posterior, readings: Mapping[str, Any], entries: lis
         table = copy.deepcopy(post.model.base)
         table["modal"].update(fit.spec.table())
         table["modal"]["start"] = dict(fit.values)
+        table["modal"]["windows"] = [*table["modal"].get("windows", []), *map(list, fit.windows)]
         with scene_errors():
             model = build_model(table, post.series, ModalModel.name)
             priors = {**model.default_priors(), **dict(zip(post.space.names, post.space.priors))}

@@ -10,7 +10,8 @@ Fitters (`Fitter`: `name`, `fit(t, y, order=None) -> FitOutcome`):
 - ours (`ModalFitter`): the scene-less modal model through the public API, the order chosen from
   the data by BIC (`vi.fit(vi.series(t, y), None, method="auto")`: what a user gets, the
   importance-sampled Laplace approximation, emcee where its check fails; the outcome records
-  which formed the intervals), and "ours-fixed", the order an analyst expects (`{"modal": {"modes": K, "lines": L, "drift": True, "noise": "ar1"}}`);
+  which formed the intervals), and "ours-fixed", the order an analyst expects
+  (`{"modal": {"modes": K, "lines": L, "drift": True, "noise": "ar1"}}`);
 - the peers (`robustness_peers`): celerite2, celerite2-ou and SSI-cov.
 
 The peers fit the order they are given: the true one (for noise_only, the clean case's: what an

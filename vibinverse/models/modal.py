@@ -58,7 +58,10 @@ The table: `{"modal": {"modes": 3, "lines": 0, "drift": True, "noise": "ar1"}}`;
 (default) or False (no white sensor noise: only beside "ar1" or "1/f"). Optional
 `"start": {name: value}` is the first starting point (the order search writes its optimum there),
 and `"values": {name: value}` the values of parameters that are not free (default: the start,
-else the first spectral guess).
+else the first spectral guess). `"windows": [[lo, hi], ...]` (Hz) narrows the frequency prior of
+each line whose start lies in one to that window (the order search writes there the band next to a
+resonance in which it found a line, `model_order.settle_near_lines`: the line was searched over
+that band, so its detection test's look-elsewhere term is the band's, not the whole spectrum's).
 
 The Fisher information (`fisher`) is numerical: the observed information, central finite
 differences of the exact log-likelihood with steps of a tenth of each parameter's width.
@@ -127,11 +130,11 @@ class ModalSpec:
             m = {}
         if not isinstance(m, dict):
             raise SceneError("modal: must be a table, e.g. {modes = 2, lines = 0, drift = true, noise = 'ar1'}")
-        unknown = set(m) - {"modes", "lines", "drift", "noise", "gain", "white", "values", "start"}
+        unknown = set(m) - {"modes", "lines", "drift", "noise", "gain", "white", "values", "start", "windows"}
         if unknown:
             raise SceneError(
                 f"modal.{sorted(unknown)[0]}: unknown key; allowed: modes, lines, drift, noise, gain, white, values, "
-                "start"
+                "start, windows"
             )
         out = {}
         for key in ("modes", "lines"):
@@ -632,6 +635,26 @@ def spectral_peaks(
     return out
 
 
+def line_windows(raw: Any) -> tuple[tuple[float, float], ...]:
+    """The `modal.windows` of a table as ((lo, hi), ...) in Hz; a one-line SceneError naming the
+    key unless each is a pair of finite numbers 0 <= lo < hi."""
+    if raw is None:
+        return ()
+    allowed = "allowed: a list of [lo, hi] frequency pairs (Hz), 0 <= lo < hi"
+    if not isinstance(raw, (list, tuple)):
+        raise SceneError(f"modal.windows: {raw!r}; {allowed}")
+    out = []
+    for k, w in enumerate(raw):
+        try:
+            lo, hi = (float(x) for x in w)
+        except (TypeError, ValueError):
+            raise SceneError(f"modal.windows[{k}]: {w!r}; {allowed}") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
+            raise SceneError(f"modal.windows[{k}]: {w!r}; {allowed}")
+        out.append((lo, hi))
+    return tuple(out)
+
+
 def mode_start(freqs: np.ndarray, power: np.ndarray, f0: float, n: int, floor: float) -> tuple[float, float]:
     """(damping ratio, rms) of a resonance at f0 from a power spectrum (`spectrum` normalization):
     the half-power width of the smoothed peak, and the band's power above `floor` (Parseval)."""
@@ -729,6 +752,7 @@ class ModalModel(SignalModel):
             self.gain_basis = np.ascontiguousarray(shapes)
         self._fixed_values = {k: float(v) for k, v in (self.base["modal"].get("values") or {}).items()}
         self._start = {k: float(v) for k, v in (self.base["modal"].get("start") or {}).items()}
+        self.windows = line_windows(self.base["modal"].get("windows"))
         self._base_values: dict[str, float] | None = None
 
     # -------------------------------------------------------------- state-space layout
@@ -1004,9 +1028,10 @@ class ModalModel(SignalModel):
     def default_priors(self) -> dict[str, Prior]:
         """Frequencies uniform from MIN_CYCLES (1) cycle per record (the least `check_fit` accepts)
         to Nyquist; damping ratios log-uniform 1e-4..0.9; mode rms log-uniform sd x (1e-4, 10); line
-        amplitudes uniform 0..3 sd; phases uniform over a period centred on the start's (the order
-        search's optimum, else the first spectral guess); level uniform over the data's range
-        widened by it on each side; noise.sigma and the coloured noise's rms log-uniform
+        amplitudes uniform 0..3 sd (a line whose start lies in one of the table's `windows`: its
+        frequency uniform over that window, within the same limits); phases uniform over a period
+        centred on the start's (the order search's optimum, else the first spectral guess); level
+        uniform over the data's range widened by it on each side; noise.sigma and the coloured noise's rms log-uniform
         sd x (1e-6, 10); ar.time log-uniform (dt / 5, span); flicker.corner log-uniform from
         FLICKER_LOWEST_CORNER (10) cycles per record to Nyquist; drift.rate log-uniform
         sd / sqrt(span) x (1e-5, 30); the gain drift's coefficients uniform (-0.5, 0.5).
@@ -1021,7 +1046,7 @@ class ModalModel(SignalModel):
             out[f"modes[{i}].damping_ratio"] = Prior("loguniform", (1e-4, 0.9))
             out[f"modes[{i}].rms"] = Prior("loguniform", (1e-4 * sd, 10.0 * sd))
         for j in range(self.spec.lines):
-            out[f"lines[{j}].frequency"] = Prior("uniform", (lo, nyq))
+            out[f"lines[{j}].frequency"] = Prior("uniform", self.line_window(j, (lo, nyq)))
             out[f"lines[{j}].amplitude"] = Prior("uniform", (0.0, 3.0 * sd))
             # a full period, centred on the start's phase (the order search's optimum, else the first
             # spectral guess): the same prior on the circle, but the MAP is not pinned at a window's
@@ -1045,6 +1070,16 @@ class ModalModel(SignalModel):
         if self.spec.white:
             out["noise.sigma"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
         return out
+
+    def line_window(self, j: int, limits: tuple[float, float]) -> tuple[float, float]:
+        """Line `j`'s frequency window: the first of the table's `windows` that holds its start,
+        within `limits`; else `limits`."""
+        f = self.value({}, f"lines[{j}].frequency") if self.windows else math.nan
+        for lo, hi in self.windows:
+            a, b = max(lo, limits[0]), min(hi, limits[1])
+            if lo <= f <= hi and a < b:
+                return a, b
+        return limits
 
     def _spectral_guesses(self) -> list[dict[str, float]]:
         """Starting values of every parameter from the periodogram: the K + L strongest peaks of

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 
 import vibinverse as vi
+from vibinverse import detection
 from vibinverse.errors import SceneError
 from vibinverse.kalman import log_likelihood_steps_reference
 from vibinverse.models import MODELS, model_class_for
@@ -24,6 +25,7 @@ from vibinverse.models.modal import (
     _oscillator,
     flicker_terms,
 )
+from vibinverse.posterior import Posterior
 
 
 def van_loan(a: np.ndarray, gq: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -367,6 +369,32 @@ def test_registry_table_and_priors():
     tests = m.line_tests(VALUES, list(priors))
     assert [t.label for t in tests] == ["line_0", "mode_0", "mode_1"]
     assert tests[0].null == {"lines[0].amplitude": 0.0} and tests[1].null == {"modes[0].rms": 0.0}
+
+
+def test_a_line_window_narrows_the_frequency_prior_of_the_line_inside_it():
+    """`modal.windows`: the line whose start lies in a window gets that window (clipped to 1 cycle
+    per record .. Nyquist) as its frequency prior, and the detection test's look-elsewhere term is
+    the window's; a line outside every window keeps the whole band. Bad windows: one-line errors."""
+    s = series_of()
+    span = s.time[-1] - s.time[0]
+    table = {"lines": 2, "start": {"lines[0].frequency": 2.0, "lines[1].frequency": 6.0}}
+    m = ModalModel({"modal": {**table, "windows": [[5.5, 6.5], [9.0, 12.0]]}}, s)
+    p = m.default_priors()
+    assert p["lines[0].frequency"].bounds == pytest.approx((1.0 / span, 10.0))
+    assert p["lines[1].frequency"].bounds == (5.5, 6.5)
+    clipped = ModalModel({"modal": {**table, "windows": [[0.0, 2.5]]}}, s).default_priors()
+    assert clipped["lines[0].frequency"].bounds == pytest.approx((1.0 / span, 2.5))
+    post = Posterior(m, p)
+    assert detection.threshold(post, "lines[1].frequency") == pytest.approx(12.5 + math.log(span + s.dt))
+    whole = detection.threshold(post, "lines[0].frequency")  # the band 1 cycle .. 10 Hz: 10 - 1 / span times wider
+    assert whole == pytest.approx(detection.threshold(post, "lines[1].frequency") + math.log(10.0 - 1.0 / span))
+    for bad, where in (
+        ([[3.0, 2.0]], r"modal\.windows\[0\]"),
+        (["x"], r"modal\.windows\[0\]"),
+        (2.0, r"modal\.windows:"),
+    ):
+        with pytest.raises(SceneError, match=where + r".*0 <= lo < hi"):
+            ModalModel({"modal": {**table, "windows": bad}}, s)
 
 
 def test_replicate_has_the_model_variance():
