@@ -261,6 +261,11 @@ def test_run_without_the_oracle_leaves_its_columns_empty():
     assert all(r["oracle_detection"] is None and r["oracle_refit_detection"] is None for r in res["rows"])
 
 
+def test_ours_fits_by_the_method_asked_and_ours_fixed_by_map():
+    fl, _ = rb.available_fitters(["ours", "ours-fixed"], method="auto")
+    assert [(f.name, f.method) for f in fl] == [("ours", "auto"), ("ours-fixed", "map")]
+
+
 def test_unknown_names_are_refused():
     with pytest.raises(ValueError, match="case"):
         rb.run(cases=["nope"], fitters=[_Fake()], log=lambda *a: None)
