@@ -726,7 +726,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--robustness",
         action="store_true",
         help="instead: our fits, celerite2 and SSI-cov (pip install '.[peers]') on gaps, jitter, coloured noise, "
-        "drift, gain drift, a weak line, three modes and noise alone (~1 h, --quick ~2.5 min)",
+        "drift, gain drift, a weak line, three modes and noise alone (~1.5 h, --quick ~4 min)",
     )
     which.add_argument(
         "--imaging",
