@@ -130,6 +130,11 @@ REPLICATES = 8  # draws of each reading for the modulation test's expected ratio
 POSSIBLE_GAIN = 4.5
 
 
+def band_frequencies(band: tuple[float, float], span: float) -> float:
+    """The independent frequencies in `band` (lo, hi) Hz over a record of `span` s (at least 1)."""
+    return max(1.0, (band[1] - band[0]) * span)
+
+
 @dataclass
 class OrderFit:
     """One fitted order: its model, the optimum, ln L there, k, and the BIC."""
@@ -152,8 +157,8 @@ class OrderFit:
         look = self.spec.modes * whole
         for j in range(self.spec.lines):
             f = self.values[f"lines[{j}].frequency"]
-            inside = [hi - lo for lo, hi in self.windows if lo <= f <= hi]
-            look += math.log(max(1.0, inside[0] * self.model.span)) if inside else whole
+            inside = [band_frequencies(w, self.model.span) for w in self.windows if w[0] <= f <= w[1]]
+            look += math.log(inside[0]) if inside else whole
         return -2.0 * self.log_likelihood + self.k * math.log(self.n) + 2.0 * look
 
 
@@ -823,7 +828,7 @@ def settle_near_lines(
     slack = 0.5 * math.log(current.n)
     found = []
     for c, i, (lo, hi) in near_line_candidates(current, series):
-        m_near = max(1.0, (hi - lo) * current.model.span)
+        m_near = band_frequencies((lo, hi), current.model.span)
         need = POSSIBLE_GAIN + math.log(m_near)
         windows = (*current.windows, (lo, hi))
         free = [*c.new, "level", "noise.sigma"]
