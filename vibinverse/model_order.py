@@ -135,6 +135,21 @@ def band_frequencies(band: tuple[float, float], span: float) -> float:
     return max(1.0, (band[1] - band[0]) * span)
 
 
+def near_reach(frequency: float, damping_ratio: float, span: float) -> float:
+    """How far (Hz) a resonance's band reaches either side: NEAR_BANDWIDTHS half-power bandwidths
+    (2 zeta f) plus NEAR_BINS Fourier bins (1 / span). A new component this close is refitted with
+    the mode (`near_modes`) and a line is searched next to it within it (`near_band`)."""
+    return NEAR_BANDWIDTHS * 2.0 * damping_ratio * frequency + NEAR_BINS / max(span, 1e-12)
+
+
+def near_band(frequency: float, damping_ratio: float, span: float, nyquist: float) -> tuple[float, float]:
+    """The band (lo, hi) Hz in which `settle_near_lines` searches a line next to a resonance: its
+    `near_reach` either side, clipped to [MIN_CYCLES / span, nyquist]. Its `band_frequencies` are the
+    line's look-elsewhere count M_near."""
+    reach = near_reach(frequency, damping_ratio, span)
+    return max(frequency - reach, MIN_CYCLES / span), min(frequency + reach, nyquist)
+
+
 @dataclass
 class OrderFit:
     """One fitted order: its model, the optimum, ln L there, k, and the BIC."""
@@ -768,9 +783,8 @@ def settle_swaps(
 
 
 def near_line_candidates(fit: OrderFit, series: Series) -> list[tuple[Candidate, int, tuple[float, float]]]:
-    """For each resonance, a line at the residual spectrum's strongest peak within its reach
-    (`near_modes`: NEAR_BANDWIDTHS half-power bandwidths plus NEAR_BINS Fourier bins), at least a
-    Fourier bin from it and from every line, as (candidate with the mode's parameters free, the
+    """For each resonance, a line at the residual spectrum's strongest peak within its `near_band`,
+    at least a Fourier bin from it and from every line, as (candidate with the mode's parameters free, the
     mode's index, the band searched there (lo, hi) Hz); a peak next to two modes once."""
     from vibinverse.spectrum import sinusoid
 
@@ -784,9 +798,9 @@ def near_line_candidates(fit: OrderFit, series: Series) -> list[tuple[Candidate,
     out, peaks = [], []
     for i in range(spec.modes):
         f, z = values[f"modes[{i}].frequency"], values[f"modes[{i}].damping_ratio"]
-        reach = NEAR_BANDWIDTHS * 2.0 * z * f + NEAR_BINS / span
-        band = (np.abs(freqs - f) <= reach) & (np.abs(freqs - f) >= 1.0 / span)
-        band &= (freqs >= MIN_CYCLES / span) & (freqs < 0.999 * nyq)
+        window = near_band(f, z, span, nyq)
+        band = (freqs >= window[0]) & (freqs <= window[1]) & (np.abs(freqs - f) >= 1.0 / span)
+        band &= freqs < 0.999 * nyq
         for g in taken:
             band &= np.abs(freqs - g) >= 1.0 / span
         if not band.any():
@@ -802,7 +816,6 @@ def near_line_candidates(fit: OrderFit, series: Series) -> list[tuple[Candidate,
         mode = [f"modes[{i}].frequency", f"modes[{i}].damping_ratio", f"modes[{i}].rms"]
         what = f"a line at {g:.5g} Hz next to the resonance at {f:.5g} Hz"
         start = {**values, new[0]: g, new[1]: a, new[2]: ph}
-        window = (max(f - reach, MIN_CYCLES / span), min(f + reach, nyq))
         out.append((Candidate(what, replace(spec, lines=k + 1), [start], [*new, *mode]), i, window))
     return out
 
@@ -981,8 +994,7 @@ def near_modes(c: Candidate, span: float) -> list[str]:
         if name in c.new or name not in start:
             continue
         f, z = start[name], start[f"modes[{i}].damping_ratio"]
-        reach = NEAR_BANDWIDTHS * 2.0 * z * f + NEAR_BINS / max(span, 1e-12)
-        if any(abs(g - f) <= reach for g in new_f):
+        if any(abs(g - f) <= near_reach(f, z, span) for g in new_f):
             out += [name, f"modes[{i}].damping_ratio", f"modes[{i}].rms"]
     return out
 
