@@ -5,6 +5,7 @@ and `vibinverse.imaging.joint_fit` for the combined series of many pixels."""
 from __future__ import annotations
 
 import copy
+import logging
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -17,6 +18,8 @@ from vibinverse.models import build_model
 from vibinverse.posterior import Posterior
 from vibinverse.priors import Prior, parse_free, parse_prior
 from vibinverse.result import FitResult
+
+logger = logging.getLogger(__name__)
 
 SceneLike = str | Path | Mapping[str, Any]
 SeriesLike = str | Path | Series
@@ -109,6 +112,15 @@ def build_posterior(
         table = scene_table(scene, overrides)
     with scene_errors():
         sm = build_model(table, data, model)
+        for k in sm.unused_windows() if modal else []:
+            lo, hi = sm.windows[k]
+            logger.warning(
+                "modal.windows[%d] (%.6g to %.6g Hz) holds no line's start, so it narrows nothing: "
+                "start a line inside it (modal.start) or fix the order with a line there",
+                k,
+                lo,
+                hi,
+            )
         return Posterior(sm, _priors(free, table)), order, modal
 
 

@@ -1071,6 +1071,11 @@ class ModalModel(SignalModel):
             out["noise.sigma"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
         return out
 
+    def unused_windows(self) -> list[int]:
+        """The indices of the table's `windows` that hold no line's start: they narrow nothing."""
+        starts = [self.value({}, f"lines[{j}].frequency") for j in range(self.spec.lines)] if self.windows else []
+        return [k for k, (lo, hi) in enumerate(self.windows) if not any(lo <= f <= hi for f in starts)]
+
     def line_window(self, j: int, limits: tuple[float, float]) -> tuple[float, float]:
         """Line `j`'s frequency window: the first of the table's `windows` that holds its start,
         within `limits`; else `limits`."""

@@ -382,6 +382,7 @@ def test_a_line_window_narrows_the_frequency_prior_of_the_line_inside_it():
     p = m.default_priors()
     assert p["lines[0].frequency"].bounds == pytest.approx((1.0 / span, 10.0))
     assert p["lines[1].frequency"].bounds == (5.5, 6.5)
+    assert m.unused_windows() == [1]  # 9-12 Hz holds no line's start: it narrows nothing
     clipped = ModalModel({"modal": {**table, "windows": [[0.0, 2.5]]}}, s).default_priors()
     assert clipped["lines[0].frequency"].bounds == pytest.approx((1.0 / span, 2.5))
     post = Posterior(m, p)
@@ -395,6 +396,24 @@ def test_a_line_window_narrows_the_frequency_prior_of_the_line_inside_it():
     ):
         with pytest.raises(SceneError, match=where + r".*0 <= lo < hi"):
             ModalModel({"modal": {**table, "windows": bad}}, s)
+
+
+def test_a_fit_warns_of_a_window_that_narrows_no_line(caplog):
+    """A fixed order with one line (7.3 Hz, A 0.5, white noise 0.5, 20 s at 100 Hz) and two
+    windows: the one holding the line becomes its frequency prior, the other is named in a warning
+    (it narrows nothing) instead of being silently unused."""
+    import logging
+
+    rng = np.random.default_rng(1)
+    t = np.arange(2000) / 100.0
+    y = 0.5 * np.cos(2 * np.pi * 7.3 * t) + rng.normal(0.0, 0.5, t.size)
+    table = {"modal": {"modes": 0, "lines": 1, "drift": False, "noise": "white", "gain": False}}
+    with caplog.at_level(logging.WARNING, logger="vibinverse"):
+        r = vi.fit(vi.series(t, y), {"modal": {**table["modal"], "windows": [[2, 3], [7, 8]]}}, method="map")
+    p = r.summary()["parameters"]["lines[0].frequency"]
+    assert p["prior"] == "uniform(7, 8)" and abs(p["median"] - 7.3) < 0.01
+    assert "modal.windows[0] (2 to 3 Hz) holds no line's start" in caplog.text
+    assert "modal.windows[1]" not in caplog.text
 
 
 def test_replicate_has_the_model_variance():
