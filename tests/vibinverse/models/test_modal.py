@@ -407,9 +407,9 @@ def test_a_fit_warns_of_a_window_that_narrows_no_line(caplog):
     rng = np.random.default_rng(1)
     t = np.arange(2000) / 100.0
     y = 0.5 * np.cos(2 * np.pi * 7.3 * t) + rng.normal(0.0, 0.5, t.size)
-    table = {"modal": {"modes": 0, "lines": 1, "drift": False, "noise": "white", "gain": False}}
+    modal = {"modes": 0, "lines": 1, "drift": False, "noise": "white", "gain": False, "windows": [[2, 3], [7, 8]]}
     with caplog.at_level(logging.WARNING, logger="vibinverse"):
-        r = vi.fit(vi.series(t, y), {"modal": {**table["modal"], "windows": [[2, 3], [7, 8]]}}, method="map")
+        r = vi.fit(vi.series(t, y), {"modal": modal}, method="map")
     p = r.summary()["parameters"]["lines[0].frequency"]
     assert p["prior"] == "uniform(7, 8)" and abs(p["median"] - 7.3) < 0.01
     assert "modal.windows[0] (2 to 3 Hz) holds no line's start" in caplog.text
