@@ -128,7 +128,8 @@ def reading_intervals(post: Posterior, readings: Mapping[str, Any], entries: lis
     """For each ambiguous entry whose reading the order search fitted (`OrderResult.readings`: a
     possible line next to a resonance), that order's MAP and Laplace 90 % intervals of the entry's
     parameters, as the entry's `intervals` ({name: [q05, q95]}) and a sentence of its advice: the
-    resonance's values with the line, beside the fit's without it. Priors: the model's defaults,
+    resonance's values with the line, beside the fit's without it (or, when the fit kept a possible
+    line, `intervals_of` "Without the line", those without it). Priors: the model's defaults,
     the fit's own where it names the parameter."""
     from vibinverse.models.modal import ModalModel
     from vibinverse.pipeline import run
@@ -153,7 +154,8 @@ def reading_intervals(post: Posterior, readings: Mapping[str, Any], entries: lis
             f"{n} {q[0]:.5g} to {q[1]:.5g}" for n, q in entry["intervals"].items() if n.startswith("modes[")
         )
         if said:
-            entry["advice"] = f"{entry.get('advice', '')} With the line, 90 % intervals: {said}.".strip()
+            label = entry.get("intervals_of", "With the line")
+            entry["advice"] = f"{entry.get('advice', '')} {label}, 90 % intervals: {said}.".strip()
 
 
 def fit_series(
