@@ -919,41 +919,36 @@ def settle_near_lines(
             f"{KEEP_GAIN + ln_m:.1f} keep it for the resonance's estimate, "
             f"{0.5 * (alt.bic - current.bic) + gained(x):.1f} detect it"
         )
+        decides = "A longer record, or the drive's frequency from elsewhere (fixed in modal.values), decides."
+        f, z = names[0], names[1]
         if kept is not None and c is kept[0]:
             row = rows[found.index(kept) - len(found)]
             row["kept"], row["fit"] = True, f"{row['fit']}; kept as a possible line, not detected"
             logger.info("model order: %s kept for the resonance's estimate (a possible line, not detected)", c.what)
-            with_ = {n: float(alt.values[n]) for n in names[:2]}
             entry = {
-                "alternative": f"no line next to the resonance at {current.values[names[0]]:.5g} Hz",
+                "alternative": f"no line next to the resonance at {current.values[f]:.5g} Hz",
                 "delta_log_posterior": float(gained(x)),
                 "measure": "ln L",
-                "decided_at": said,
-                "values": {n: float(current.values[n]) for n in names[:2]},
-                "mode": i,
+                "values": {n: float(current.values[n]) for n in (f, z)},
                 "intervals_of": "Without the line",
                 "advice": f"Resonance {i}'s values depend on whether a line at {alt.values[names[2]]:.5g} Hz is "
                 f"there: the fit keeps it (a resonance that takes in a line's power moves towards it), giving "
-                f"{with_[names[0]]:.5g} Hz (zeta {with_[names[1]]:.2g}); without it "
-                f"{current.values[names[0]]:.5g} Hz (zeta {current.values[names[1]]:.2g}). A longer record, "
-                "or the drive's frequency from elsewhere (fixed in modal.values), decides.",
+                f"{alt.values[f]:.5g} Hz (zeta {alt.values[z]:.2g}); without it {current.values[f]:.5g} Hz "
+                f"(zeta {current.values[z]:.2g}). {decides}",
             }
-            ambiguous.append((entry, current))
+            ambiguous.append(({**entry, "decided_at": said, "mode": i}, current))
             continue
         base = kept[3] if kept is not None else current
         entry = {
             "alternative": c.what,
             "delta_log_posterior": float(0.5 * (alt.bic - current.bic)),
             "measure": "BIC / 2 (with the look-elsewhere term)",
-            "decided_at": said,
             "values": {n: float(alt.values[n]) for n in names},
-            "mode": i,
             "advice": f"Resonance {i}'s values depend on whether this line is there: with it, "
-            f"{alt.values[names[0]]:.5g} Hz (zeta {alt.values[names[1]]:.2g}) instead of "
-            f"{base.values[names[0]]:.5g} Hz (zeta {base.values[names[1]]:.2g}). A longer record, "
-            "or the drive's frequency from elsewhere (fixed in modal.values), decides.",
+            f"{alt.values[f]:.5g} Hz (zeta {alt.values[z]:.2g}) instead of "
+            f"{base.values[f]:.5g} Hz (zeta {base.values[z]:.2g}). {decides}",
         }
-        ambiguous.append((entry, alt))
+        ambiguous.append(({**entry, "decided_at": said, "mode": i}, alt))
     return (kept[3] if kept is not None else None), kept is not None, ambiguous
 
 
