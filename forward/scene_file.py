@@ -118,6 +118,7 @@ def scene_from_table(data: dict[str, Any]) -> Scene:
     top = Table(data, "")
     top.raw("title", "")
     top.raw("infer", None)  # read by `vibinverse fit` (free parameters and priors)
+    top.raw("nuisance", None)  # read by `vibinverse fit` (coloured noise, drift, gain drift beside the scene)
     sun = _sun(top.table("sun"))
     sensor = _sensor(top.table("sensor"))
     sampling = _sampling(top.table("sampling"))

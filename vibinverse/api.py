@@ -107,6 +107,10 @@ def fit(
     max_steps: int = 20000,
     progress: bool = False,
     pixels: Any = None,
+    noise: str | None = None,
+    drift: str | bool | None = None,
+    gain: bool | int | str | None = None,
+    white: bool | None = None,
     **cube_options: Any,
 ) -> FitResult:
     """Fit a measured series against the scene that describes the observation.
@@ -129,12 +133,23 @@ def fit(
     chosen by BIC (`vibinverse.model_order`); `result.diagnostics["model_order"]` holds the
     criterion table (each step: what was tried, its BIC, kept or not; [] when the table fixes the
     order) and `result.data["components"]` the fitted components.
+
+    Nuisance terms (`vibinverse.terms`), on a scene's model as on the modal one: `noise` ("white",
+    "ar1", "1/f"), `drift` ("none", "walk", "integrated"; True is "walk"), `gain` (True or "drift": a
+    multiplicative gain drift of 6 cosines; an integer: that many), `white` (False: no white sensor
+    noise beside a coloured one). With a scene they go into its `nuisance` table, e.g.
+    `vi.fit(series, scene, noise="ar1", drift="walk")` fits the frame's tilt beside AR(1) noise and
+    a random-walk drift in one Kalman filter.
     """
+    given = {"noise": noise, "drift": drift, "gain": gain, "white": white}
+    nuisance = {k: v for k, v in given.items() if v is not None}
     if _is_cube(series) or pixels is not None:
         if not _is_cube(series):
             raise InputError("pixels: needs an image cube (vi.open_cube), not a single series")
         from vibinverse.imaging.joint_fit import fit_pixels
 
+        if nuisance:
+            raise InputError(f"{next(iter(nuisance))}: nuisance terms are fitted on a single series, not on a cube")
         options = {"method": method, "free": free, "model": model, "overrides": overrides, "seed": seed}
         options.update(chain=chain, resume=resume, workers=workers, max_steps=max_steps, progress=progress)
         return fit_pixels(series, "all" if pixels is None else pixels, scene, **cube_options, **options)
@@ -153,6 +168,7 @@ def fit(
         workers=workers,
         max_steps=max_steps,
         progress=progress,
+        nuisance=nuisance,
     )
 
 

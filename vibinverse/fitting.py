@@ -92,24 +92,64 @@ def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]
     return table, order
 
 
+def with_nuisance(
+    scene: SceneLike | None, overrides: Sequence[str], nuisance: Mapping[str, Any] | None, modal: bool
+) -> SceneLike | None:
+    """The scene with the nuisance terms asked for (`noise`, `drift`, `gain`, `white`) written in:
+    into the modal table's order without a scene, into the scene's `nuisance` table with one
+    (`vibinverse.terms.nuisance.NuisanceSpec`; one-line errors for bad values)."""
+    if not nuisance:
+        return scene
+    from vibinverse.terms.nuisance import NuisanceSpec
+
+    unknown = sorted(set(nuisance) - {"noise", "drift", "gain", "white"})
+    if unknown:
+        raise InputError(f"{unknown[0]}: not a nuisance term; allowed: noise, drift, gain, white")
+    table = {"modal": {}} if scene is None else scene_table(scene, overrides)
+    key = "modal" if modal else "nuisance"
+    section = dict(table.get(key) or {})
+    merged = {k: v for k, v in {**section, **nuisance}.items() if k in ("noise", "drift", "gain", "white")}
+    with scene_errors():
+        spec = NuisanceSpec.from_table({key: merged}, key)  # one-line errors naming the key
+    written = spec.table()
+    section.update({k: written[k] for k in nuisance})
+    if modal and "drift" in nuisance:  # the modal table's spelling: false or the kind
+        section["drift"] = spec.drift != "none" and spec.drift
+    table[key] = section
+    return table
+
+
 def build_posterior(
     series: SeriesLike,
     scene: SceneLike | None,
     free: Mapping[str, Prior | str] | None,
     model: str | None,
     overrides: Sequence[str],
+    nuisance: Mapping[str, Any] | None = None,
 ) -> tuple[Posterior, Any, bool]:
-    """(posterior, the order search or None, whether the model is the modal model)."""
+    """(posterior, the search that chose the model's parts or None, whether the model is the modal
+    model): the modal model's order search (`vibinverse.model_order`), or for a scene whose model
+    takes nuisance terms the search of those the table leaves open
+    (`vibinverse.selection.nuisance_search`). `nuisance` fixes nuisance terms (`with_nuisance`)."""
     from vibinverse.models.modal import ModalModel
 
     data = as_series(series)
     order = None
     modal = _is_modal(scene, model)
+    if nuisance:
+        scene, overrides = with_nuisance(scene, overrides, nuisance, modal), ()
     if modal:
         table, order = _modal_table(data, scene, overrides)
         model = ModalModel.name
     else:
         table = scene_table(scene, overrides)
+        with scene_errors():
+            from vibinverse.models import model_class_for
+            from vibinverse.selection.nuisance_search import search_nuisance, wanted
+
+            if wanted(table, model_class_for(table, model)):
+                order = search_nuisance(table, data, _priors(free, table), model)
+                table["nuisance"] = {**(table.get("nuisance") or {}), **order.table()}
     with scene_errors():
         sm = build_model(table, data, model)
         for k in sm.unused_windows() if modal else []:
@@ -121,7 +161,10 @@ def build_posterior(
                 lo,
                 hi,
             )
-        return Posterior(sm, _priors(free, table)), order, modal
+        priors = _priors(free, table)
+        if priors is not None:  # the nuisance terms stay free beside the parameters the analyst names
+            priors = {**sm.nuisance_priors(), **priors}
+        return Posterior(sm, priors), order, modal
 
 
 def reading_intervals(post: Posterior, readings: Mapping[str, Any], entries: list[dict[str, Any]], seed: int) -> None:
@@ -172,6 +215,7 @@ def fit_series(
     workers: int = 1,
     max_steps: int = 20000,
     progress: bool = False,
+    nuisance: Mapping[str, Any] | None = None,
 ) -> FitResult:
     """`vibinverse.api.fit` of one series (its docstring has the options)."""
     from vibinverse.pipeline import check_method, run
@@ -181,7 +225,7 @@ def fit_series(
         raise InputError("workers and max_steps: must be >= 1")
     if resume and chain is None:
         raise InputError("resume: needs the chain (checkpoint) file of the run to continue")
-    post, order, modal = build_posterior(series, scene, free, model, overrides)
+    post, order, modal = build_posterior(series, scene, free, model, overrides, nuisance)
     with scene_errors(), tempfile.TemporaryDirectory(prefix="vibinverse-") as tmp:
         result = run(
             post,
@@ -201,4 +245,7 @@ def fit_series(
         result.data["components"] = post.model.components(result.point)
         if order is not None:
             result.timing["model_order_s"] = order.seconds
+    elif order is not None:  # a scene's nuisance terms, chosen by the data
+        result.diagnostics["nuisance_search"] = order.criterion
+        result.timing["nuisance_search_s"] = order.seconds
     return result

@@ -804,6 +804,35 @@ def _diagnostic(v: Any) -> str:
     return _text(v)
 
 
+def terms_html(summary: dict) -> str:
+    """The model's parts and why: the terms chosen beside a scene's model (or the modal model's
+    order), and the search's table: each proposal, its change of BIC, kept or not. Empty when no
+    search ran."""
+    d = summary["diagnostics"]
+    rows = d.get("nuisance_search") or d.get("model_order")
+    if not isinstance(rows, list) or not rows:
+        return ""
+    chosen = (summary["data"].get("model") or {}).get("terms")
+    kept = [r for r in rows if isinstance(r, dict) and r.get("kept")]
+    final = chosen or (kept[-1].get("terms") or kept[-1].get("order") if kept else None)
+    body = "".join(
+        f"<tr><td>{_text(r.get('step'))}</td><td>{_text(r.get('tried'))}</td>"
+        f"<td>{_text(r.get('terms') or r.get('order'))}</td>"
+        f"<td>{format_number(r.get('delta_bic'), '+.1f') if r.get('delta_bic') is not None else ''}</td>"
+        f"<td>{'kept' if r.get('kept') else ''}</td></tr>"
+        for r in rows
+        if isinstance(r, dict)
+    )
+    return (
+        '<section id="terms"><h2>Model terms</h2>'
+        f"<p>Chosen by the data: <b>{_text(final or 'see the table')}</b>. Each step tried the proposals below "
+        "and kept the one that lowered the Bayesian information criterion (BIC = -2 ln L + k ln n) most; a "
+        "term stays out unless the data pay for its parameters.</p>"
+        '<div class="table-wrap"><table><tr><th>step</th><th>tried</th><th>terms</th><th>&Delta;BIC</th>'
+        f"<th></th></tr>{body}</table></div></section>"
+    )
+
+
 def write_report(result: Path, outdir: Path) -> Path:
     """Write `outdir/report.html` for the result netCDF `result`; returns its path."""
     import matplotlib
@@ -826,7 +855,7 @@ def write_report(result: Path, outdir: Path) -> Path:
     diag = "".join(
         f'<tr><td>{_text(k)}</td><td class="diag">{_diagnostic(val)}</td></tr>'
         for k, val in summary["diagnostics"].items()
-        if k != "sindy"
+        if k not in ("sindy", "nuisance_search", "model_order")
     )
     sindy = summary["diagnostics"].get("sindy")
     if not isinstance(sindy, dict):
@@ -861,6 +890,7 @@ def write_report(result: Path, outdir: Path) -> Path:
 <section id="warnings"><h2>Warnings</h2>{"".join(f'<div class="warn">{_text(w)}</div>' for w in warn) or "<p>No warnings.</p>"}</section>
 <section id="about"><h2>Method and data</h2><p>Method: <b>{_text(summary["method"])}</b>. Data: {_text(data.get("description", ""))} ({_text(data.get("source", ""))}); intensity in {_text(units)}, time in {_text(data.get("time_units") or "s")}. Timing: {timing}.</p></section>
 {_parameters_html(summary, idata, safe, names)}
+{terms_html(summary)}
 {figures}
 {equation}<section id="diagnostics"><h2>Diagnostics</h2><div class="table-wrap"><table>{diag}</table></div></section>
 </body></html>"""

@@ -523,3 +523,24 @@ def test_a_report_of_nulls_and_non_finite_numbers(tmp_path):
     }
     warn = warnings_for(summary, None, ["x"])
     assert len(warn) == 1 and "not converged (R-hat n/a" in warn[0]
+
+
+def test_the_report_names_the_chosen_terms_and_why():
+    from vibinverse.report import terms_html
+
+    rows = [
+        {"step": 0, "tried": "the scene's model", "terms": "white noise", "delta_bic": None, "kept": True},
+        {
+            "step": 1,
+            "tried": "AR(1) noise added",
+            "terms": "AR(1) noise, white noise",
+            "delta_bic": -373.3,
+            "kept": True,
+        },
+        {"step": 1, "tried": "random-walk drift added", "terms": "random-walk drift", "delta_bic": 8.3, "kept": False},
+    ]
+    summary = {"diagnostics": {"nuisance_search": rows}, "data": {"model": {"terms": "AR(1) noise, white noise"}}}
+    html = terms_html(summary)
+    assert "Model terms" in html and "<b>AR(1) noise, white noise</b>" in html
+    assert "-373.3" in html and "+8.3" in html and html.count("kept") >= 2
+    assert terms_html({"diagnostics": {}, "data": {}}) == ""

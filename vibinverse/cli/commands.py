@@ -341,12 +341,20 @@ def _fit_table(args: argparse.Namespace) -> dict[str, Any]:
     order `--modes`, `--lines`, `--drift`, `--noise` and `--gain` fix (the rest is chosen by BIC)."""
     given = {k: getattr(args, k) for k in MODAL_OPTIONS if getattr(args, k) is not None}
     if args.scene is not None:
-        if given:
-            raise InputError(
-                f"--{next(iter(given))}: fixes the order of the scene-less modal model; with --scene the scene "
-                "describes the signal"
-            )
-        return api.load_scene(args.scene, args.set or [])
+        for k in ("modes", "lines"):
+            if k in given:
+                raise InputError(
+                    f"--{k}: fixes the order of the scene-less modal model; with --scene the scene describes "
+                    "the signal (--noise, --drift and --gain add nuisance terms beside it)"
+                )
+        table = api.load_scene(args.scene, args.set or [])
+        nuisance = dict(table.get("nuisance") or {})
+        nuisance.update({k: given[k] for k in ("noise", "drift") if k in given})
+        if "gain" in given:
+            nuisance["gain"] = given["gain"] == "drift"
+        if nuisance:
+            table["nuisance"] = nuisance
+        return table
     if args.set:
         raise InputError(
             "--set: overrides a scene value; give --scene, or fix the modal model by --modes, --lines, ..."
@@ -616,16 +624,20 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--modes", type=int, metavar="K", help="without --scene: fix the number of resonances (0-6)")
     fit.add_argument("--lines", type=int, metavar="L", help="without --scene: fix the number of lines (0-6)")
     fit.add_argument(
-        "--drift", choices=("none", "walk", "integrated"), help="without --scene: fix the drift term (random walk)"
+        "--drift",
+        choices=("none", "walk", "integrated"),
+        help="fix the drift term (random walk, or integrated); with --scene a nuisance term beside the scene's model",
     )
     fit.add_argument(
-        "--noise", choices=("white", "ar1", "1/f"), help="without --scene: fix the noise model (white + which term)"
+        "--noise",
+        choices=("white", "ar1", "1/f"),
+        help="fix the noise model (white + which term); with --scene a nuisance term beside the scene's model",
     )
     fit.add_argument(
         "--gain",
         choices=("none", "drift"),
-        help="without --scene: fix the multiplicative gain drift (a cloud dims the whole signal): none, or drift "
-        "(6 cosines, 0.5-3 cycles per record)",
+        help="fix the multiplicative gain drift (a cloud dims the whole signal): none, or drift (6 cosines, 0.5-3 "
+        "cycles per record); with --scene it multiplies the scene's signal",
     )
     fit.add_argument("--set", action="append", metavar="dotted.key=value", help="override a scene value")
     fit.add_argument(

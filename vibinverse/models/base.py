@@ -59,6 +59,10 @@ class SignalModel(ABC):
     #: approximation (`estimators.importance`), emcee only when its check fails, at any record
     #: length (otherwise only past `pipeline.IMPORTANCE_RECORD` samples)
     importance_first: ClassVar[bool] = False
+    #: nuisance terms (`vibinverse.terms`: coloured noise, drift, gain drift) sit beside the model's
+    #: own state when its table's `nuisance` asks, and the fit searches them when it leaves one open
+    #: (`vibinverse.selection.nuisance_search`)
+    accepts_nuisance: ClassVar[bool] = False
 
     series: Series
     base: dict[str, Any]
@@ -106,6 +110,10 @@ class SignalModel(ABC):
     @abstractmethod
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
         """Fisher information of `names` at `values`."""
+
+    def nuisance_priors(self) -> dict[str, Prior]:
+        """Default priors of the nuisance terms' parameters (free beside any the analyst names)."""
+        return {}
 
     def check_free(self, names: list[str]) -> None:
         """One-line SceneError when these free parameters cannot be fitted on this model."""

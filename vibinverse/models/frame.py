@@ -34,6 +34,7 @@ import numpy as np
 from forward.errors import SceneError as ForwardSceneError
 from forward.motion.frame import FrameParameters, linearize
 from forward.reduce import rigid_observation
+from vibinverse.engines.kalman import run_blocks, simulate_blocks
 from vibinverse.errors import DataError, NumericalError, SceneError, Unsupported
 from vibinverse.fisher import frame_fisher
 from vibinverse.io.scenes import scene_of
@@ -41,6 +42,7 @@ from vibinverse.io.series import MIN_CYCLES, Series, with_sampling
 from vibinverse.kalman import (
     held_oscillator_fill,
     held_stationary,
+    hold_samples,
     log_likelihood,
     log_likelihood_steps,
     njit,
@@ -50,10 +52,12 @@ from vibinverse.kalman import (
     whiten,
     whiten_steps,
 )
-from vibinverse.models.base import LineTest, SignalModel, register_model
+from vibinverse.models.base import LineTest, SignalModel, intensity_units, observed_information, register_model
 from vibinverse.models.frame_spectral import frame_guess, frame_guesses
 from vibinverse.priors import Prior
 from vibinverse.scene_keys import get_value, numeric_keys, set_value
+from vibinverse.terms.base import DataFacts
+from vibinverse.terms.nuisance import NuisanceSpec
 
 if TYPE_CHECKING:
     from vibinverse.posterior import Posterior
@@ -101,6 +105,23 @@ class Components:
     phis: np.ndarray | None = None
     qs: np.ndarray | None = None
     idx: np.ndarray | None = None
+    #: with nuisance terms (`vibinverse.terms`): each state's block (lo, hi), the tilt states (the
+    #: first `n_tilt`, which a gain drift multiplies by `hm` at each sample; `hm` empty without one)
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
+    n_tilt: int = 0
+    hm: np.ndarray | None = None
+    valid: bool = True  # False: a nuisance value outside its term's domain (the likelihood is -inf)
+
+    @property
+    def composed(self) -> bool:
+        """Whether nuisance terms sit beside the tilt modes (the block engine runs it)."""
+        return self.lo is not None
+
+    def tilt_variance(self) -> float:
+        """The stationary variance of the tilt's first-order observation (the nuisance states left out)."""
+        n = self.n_tilt if self.composed else self.h.size
+        return float(self.h[:n] @ self.p0[:n, :n] @ self.h[:n])
 
     def tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(phis, qs, idx) for the per-step filter (a uniform grid: its one step for every sample)."""
@@ -118,6 +139,7 @@ class FrameModel(SignalModel):
     releases_gil = True  # numba nogil kernels, and `components` allocates per call (no shared scratch)
     map_start_margin = 50.0  # a swapped drive/resonance assignment starts far below the best
     casadi_bytes_per_sample = 25e3  # MX graph over SX blocks and IPOPT: 9-21 kB a sample measured (12000, 4000)
+    accepts_nuisance = True
 
     @classmethod
     def describes(cls, table: dict) -> bool:
@@ -137,8 +159,10 @@ class FrameModel(SignalModel):
             out += [k + "drive_frequency", k + "drive_amplitude"]
         return out
 
-    def __init__(self, table: dict, series: Series, *, per_step: bool | None = None):
-        """`per_step`: the per-step filter even on a uniform grid (None: on irregular stamps only)."""
+    def __init__(self, table: dict, series: Series, *, per_step: bool | None = None, facts: DataFacts | None = None):
+        """`per_step`: the per-step filter even on a uniform grid (None: on irregular stamps only);
+        `facts`: the data facts the nuisance terms span (default: the series'; `head` keeps the
+        whole record's)."""
         self.base = modal_table(table)
         self.roof = frame_surface(self.base)
         others = [n for n, s in self.base["surfaces"].items() if n != self.roof and (s.get("motion") or {})]
@@ -194,6 +218,12 @@ class FrameModel(SignalModel):
         else:
             self._steps, self._idx = np.array([self.dt]), None
         self._observed: tuple[tuple, tuple] | None = None  # the last re-formed observation, by its values
+        # nuisance terms beside the tilt modes (`vibinverse.terms`): the sensor noise stays the
+        # scene's noise.sigma (absent when the spec has no white noise)
+        self.nuisance = NuisanceSpec.from_table(self.base)
+        self.extra = self.nuisance.terms(white=False)
+        self._facts = DataFacts.of(series) if facts is None else facts
+        self._nuisance_base: dict[str, float] | None = None
 
     @property
     def steps(self) -> np.ndarray:
@@ -249,10 +279,77 @@ class FrameModel(SignalModel):
                 p0[block, block] = held_stationary(phis[-1, block, block], qs[-1, block, block])
             h[2 * b] = gains[i]
         sigma = values.get("noise.sigma", self.base_value("noise.sigma") if "noise" in self.base else 0.0)
+        if not self.nuisance.white:
+            sigma = 0.0
+        if self.extra:
+            return self._composed(values, mean, phis, qs, p0, h, float(sigma) ** 2)
         phi, q = phis[-1], qs[-1]
         if self.per_step:
             return Components(mean, phi, q, h, float(sigma) ** 2, p0, phis, qs, self._idx)
         return Components(mean, phi, q, h, float(sigma) ** 2, p0)
+
+    def _composed(
+        self,
+        values: dict[str, float],
+        mean: np.ndarray,
+        phis: np.ndarray,
+        qs: np.ndarray,
+        p0: np.ndarray,
+        h: np.ndarray,
+        r: float,
+    ) -> Components:
+        """The tilt modes' blocks first, the nuisance terms' after them (`TermSum.state_space`), a
+        gain drift multiplying the mean and the tilt's observation."""
+        n = h.size
+        v = {name: self.nuisance_value(values, name) for name in self.extra.names()}
+        valid = self.extra.valid(v)
+        if not valid:  # tables at the starts; the likelihood reads `valid`
+            v = {name: self.nuisance_value({}, name) for name in self.extra.names()}
+        ss = self.extra.state_space(v, self._steps, self._facts, lead=n)
+        ss.phis[:, :n, :n], ss.qs[:, :n, :n], ss.p0[:n, :n], ss.h[:n] = phis, qs, p0, h
+        for b in range(0, n, 2):
+            ss.lo[b : b + 2], ss.hi[b : b + 2] = b, b + 2
+        hm = ss.hm[: self.t.size]
+        if hm.size:
+            valid = valid and bool(hm.min() > 0.0)  # 1 + g must stay positive
+            mean = mean * hm
+        idx = self._idx if self.per_step else np.zeros(self.t.size, dtype=np.int64)
+        phi, q = ss.phis[-1], ss.qs[-1]
+        return Components(mean, phi, q, ss.h, r, ss.p0, ss.phis, ss.qs, idx, ss.lo, ss.hi, n, hm, valid)
+
+    def nuisance_value(self, values: dict[str, float], name: str) -> float:
+        """A nuisance term's parameter: from `values`, else the table's `nuisance.values` (fixed) or
+        `nuisance.start` (the nuisance search's optimum), else its spectral start (`Term.starts`,
+        computed once from the whole record)."""
+        if name in values:
+            return values[name]
+        if self._nuisance_base is None:
+            table = self.base.get("nuisance") or {}
+            given = {k: float(x) for key in ("start", "values") for k, x in (table.get(key) or {}).items()}
+            self._nuisance_base = {**self.extra.starts(self._facts), **given}
+        return self._nuisance_base[name]
+
+    def _engine(self, c: Components, white: np.ndarray | None = None, lls: np.ndarray | None = None) -> float:
+        """The block engine on the composed state (`vibinverse.engines.kalman.run_blocks`)."""
+        if not c.valid:
+            return -math.inf
+        hold = 0 if c.hm.size else hold_samples(c.phis)
+        return run_blocks(
+            self.series.intensity - c.mean,
+            c.phis,
+            c.qs,
+            c.idx,
+            c.lo,
+            c.hi,
+            c.h,
+            c.r,
+            c.p0,
+            hold=hold,
+            white=white,
+            lls=lls,
+            hm=c.hm,
+            nscaled=c.n_tilt,
+        )
 
     def _geometry_names(self) -> set[str]:
         """Scene values the observation depends on and the frame's dynamics do not: sun, view,
@@ -349,7 +446,8 @@ class FrameModel(SignalModel):
         lines = len(self.base["surfaces"][self.roof]["motion"].get("drive_frequency", []) or [])
         for n in ("drive_frequency", "drive_amplitude", "drive_phase"):
             names |= {f"{k}{n}[{i}]" for i in range(lines)} | ({k + n} if lines else set())
-        return names
+        names |= set(self.extra.names())
+        return names if self.nuisance.white else names - {"noise.sigma"}
 
     def line_value(self, values: dict[str, float], name: str, i: int) -> float:
         """Drive line i's value: "name[i]" (or plain "name" for line 0) from `values`, else the base."""
@@ -375,6 +473,8 @@ class FrameModel(SignalModel):
         c = self.components(values)
         if not math.isfinite(c.p0.sum()):  # undamped and driven: no stationary start
             return -math.inf
+        if c.composed:
+            return self._engine(c)
         if c.idx is not None:
             return log_likelihood_steps(self.series.intensity - c.mean, c.phis, c.qs, c.idx, c.h, c.r, c.p0)
         return log_likelihood(self.series.intensity - c.mean, c.phi, c.q, c.h, c.r, c.p0)
@@ -382,12 +482,17 @@ class FrameModel(SignalModel):
     def head(self, n: int) -> FrameModel:
         """The frame model of the first n samples (the same scene and filter: per-step on a stretch
         of irregular stamps that happens to be uniform)."""
-        return FrameModel(self.base, self.series.head(n), per_step=self.per_step)
+        # the whole record's facts: a gain drift's cosines, the 1/f states and the starts span it
+        return FrameModel(self.base, self.series.head(n), per_step=self.per_step, facts=self._facts)
 
     def pointwise_log_likelihood(self, values: dict[str, float]) -> np.ndarray:
         """Each sample's one-step predictive log density log p(y_k | y_1..y_{k-1}) (the Kalman
         filter's innovation density), NaN at gaps; `np.nansum` of it is `log_likelihood(values)`."""
         c = self.components(values)
+        if c.composed:
+            out = np.empty(self.t.size)
+            self._engine(c, lls=out)
+            return out
         return pointwise_log_likelihood(self.series.intensity - c.mean, *c.tables(), c.h, c.r, c.p0)
 
     def residuals(self, values: dict[str, float]) -> np.ndarray:
@@ -395,6 +500,10 @@ class FrameModel(SignalModel):
         describes the data; NaN at gaps."""
         c = self.components(values)
         y = self.series.intensity - c.mean
+        if c.composed:
+            out = np.empty(self.t.size)
+            self._engine(c, white=out)
+            return out
         if c.idx is not None:
             return whiten_steps(y, c.phis, c.qs, c.idx, c.h, c.r, c.p0)
         return whiten(y, c.phi, c.q, c.h, c.r, c.p0)
@@ -408,7 +517,11 @@ class FrameModel(SignalModel):
             raise NumericalError(
                 f"replicate: {self.key}tilt_damping_ratio = 0 with base noise has no stationary state to start from"
             )
-        out = c.mean + simulate(*c.tables(), c.h, c.r, c.p0, rng)
+        if c.composed:
+            draw = simulate_blocks(c.phis, c.qs, c.idx, c.lo, c.hi, c.h, c.r, c.p0, rng, hm=c.hm, nscaled=c.n_tilt)
+            out = c.mean + draw
+        else:
+            out = c.mean + simulate(*c.tables(), c.h, c.r, c.p0, rng)
         out[self.series.gaps] = np.nan
         return out
 
@@ -428,12 +541,19 @@ class FrameModel(SignalModel):
             k + "drive_amplitude": Prior("uniform", (0.0, 0.05)),
             k + "drive_phase": Prior("uniform", (-np.pi, np.pi)),
             k + "noise_rms": Prior("loguniform", (1e-7, 1e-1)),
-            "noise.sigma": Prior("loguniform", (1e-8, 1e3)),
+            **({"noise.sigma": Prior("loguniform", (1e-8, 1e3))} if self.nuisance.white else {}),
+            **self.extra.priors(self._facts),
         }
 
     def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
-        """One start per plausible drive line, most steady first (`frame_spectral.frame_guesses`)."""
-        return frame_guesses(self.series, self, bounds)
+        """One start per plausible drive line, most steady first (`frame_spectral.frame_guesses`),
+        the nuisance terms' from their spectral starts (`Term.starts`)."""
+        out = frame_guesses(self.series, self, bounds)
+        for g in out:
+            g.update({n: self.nuisance_value({}, n) for n in self.extra.names()})
+            if not self.nuisance.white:
+                g.pop("noise.sigma", None)
+        return out
 
     def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
         """The drive line (its amplitude to 0) and the tilt resonance (the base noise to 0)."""
@@ -448,12 +568,43 @@ class FrameModel(SignalModel):
         return out
 
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
-        """Mean term through the Kalman filter plus Whittle's covariance term (`vibinverse.fisher`)."""
-        return frame_fisher(self, values, names)
+        """Mean term through the Kalman filter plus Whittle's covariance term (`vibinverse.fisher`);
+        with nuisance terms the observed information (finite differences of the exact likelihood)."""
+        if not self.extra:
+            return frame_fisher(self, values, names)
+        v0 = {n: values[n] if n in values else self._value(n) for n in names}
+        return observed_information(
+            lambda d: self.log_likelihood({**values, **d}),
+            v0,
+            names,
+            lambda n: max(abs(v0[n]), 1e-12) if not n.endswith("phase") else 1.0,
+            lambda n: not n.endswith(("phase", "level")) and not n.startswith("gain."),
+        )
+
+    def nuisance_priors(self) -> dict[str, Prior]:
+        """The nuisance terms' default priors (`Term.priors`)."""
+        return self.extra.priors(self._facts)
+
+    def _value(self, name: str) -> float:
+        """A parameter's value when not given: a nuisance term's start, else the scene's."""
+        return self.nuisance_value({}, name) if name in self.extra.names() else self.base_value(name)
+
+    def describe(self) -> dict[str, Any] | None:
+        """The nuisance terms beside the tilt modes, when there are any."""
+        if not self.extra and self.nuisance.white:
+            return None
+        return {"kind": "frame", "nuisance": self.nuisance.table(), "terms": self.nuisance.describe()}
+
+    def units(self, name: str) -> tuple[str, str]:
+        """A nuisance term's own units (`Term.units`), else by the name (`SignalModel.units`)."""
+        found = self.extra.units(name, intensity_units(self.series))
+        return found if found is not None else super().units(name)
 
     def casadi_objective(self, posterior: Posterior) -> Any:
         """`frame_casadi.CasadiFrameObjective`; Unsupported when a geometry value is free (the
         casadi form holds the observation fixed)."""
+        if self.extra or not self.nuisance.white:
+            raise Unsupported(f"the casadi MAP has no nuisance terms ({self.nuisance.describe()}) yet")
         geometry = self.geometry_free(posterior.space.names)
         if geometry:
             raise Unsupported(f"the casadi MAP holds the observation fixed; {', '.join(geometry)} re-form it")
@@ -501,7 +652,8 @@ class FrameModel(SignalModel):
         g the tilt's stationary rms plus the drive's tilt amplitude, at `values` (others from the
         scene). Small on the specular lobe centre or over a symmetric footprint (J -> 0)."""
         c = self.components({**values, self.key + "drive_amplitude": 0.0})
-        g_noise = float(np.sqrt(max(np.trace(c.p0) / max(c.h.size // 2, 1), 0.0)))
+        n = c.n_tilt if c.composed else c.h.size
+        g_noise = float(np.sqrt(max(np.trace(c.p0[:n, :n]) / max(n // 2, 1), 0.0)))
         drive = self.components({**values, self.key + "noise_rms": 0.0}).mean
         j = float(np.linalg.norm(self.jac))
         g_drive = float(np.ptp(drive)) / 2 / j if j > 0 else 0.0

@@ -117,7 +117,7 @@ def frame_guess(
         guess[k + "drive_phase"] = float(np.angle(np.exp(1j * (ph_sig - ph_m))))
     probe.update({k + "noise_rms": 1.0, k + "drive_amplitude": 0.0, k + "drive_frequency": f_d or 1.0})
     c = like.components(probe)
-    unit_var = float(c.h @ c.p0 @ c.h)
+    unit_var = c.tilt_variance()
     stoch = max(float(np.nanvar(resid)) - sigma**2, 1e-6 * sigma**2)
     guess[k + "noise_rms"] = float(np.sqrt(stoch / max(unit_var, 1e-300)))
     return guess

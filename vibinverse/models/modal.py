@@ -29,7 +29,7 @@ and nuisance terms, all in one Kalman filter (`ModalModel`, registered as "modal
   0.5 to J / 2 cycles per record (J = 6 by default: a smooth change over the record). Given the
   coefficients the model stays linear-Gaussian: the level and the lines are multiplied by
   1 + g(t_k), and the modes' observation row by the same factor at each sample (the filter's
-  observation vector varies per sample, `_block_filter`'s `hm`), so the likelihood is exact.
+  observation vector varies per sample, `vibinverse.engines.kalman.block_filter`'s `hm`), so the likelihood is exact.
   1 + g must stay positive.
 
 Every random block is discretized exactly over each time step (`_fill_tables`, compiled): the
@@ -39,10 +39,10 @@ the step is short against the oscillator's rate, where the closed form cancels),
 Ornstein-Uhlenbeck states by their elementary forms. A uniform grid has one step; irregular stamps
 (jitter, dropped frames) a table of the distinct steps (`vibinverse.kalman.unique_steps`, rounded to
 1e-9 of the median step) with an index per sample: the same exact discretization per step. NaN
-samples are gaps. The state transition is block diagonal (2 x 2 and 1 x 1 blocks), and the filter
-(`_block_filter`, compiled, O(T)) uses that: the covariance is propagated block pair by block pair
-in closed form (`_predict_cov`, O(n^2) a step instead of O(n^3) for n states), and once the gain
-and the innovation variance have reached the Riccati recursion's fixed point (their change between
+samples are gaps. The state transition is block diagonal (2 x 2 and 1 x 1 blocks), and the engine
+(`vibinverse.engines.kalman.block_filter`, compiled, O(T)) uses that: the covariance is propagated
+block pair by block pair in closed form (O(n^2) a step instead of O(n^3) for n states), and once the
+gain and the innovation variance have reached the Riccati recursion's fixed point (their change between
 two observed samples of the same step, extrapolated geometrically, below 1e-14 of their scale) the
 gain is held until a gap or another step: O(n) a step from there, the same numbers to rounding
 (tested against the plain numpy filter to 1e-10). White noise alone has one dummy state nobody sees.
@@ -77,9 +77,10 @@ from typing import Any
 
 import numpy as np
 
+from vibinverse.engines.kalman import block_filter, simulate_blocks
 from vibinverse.errors import SceneError
 from vibinverse.io.series import MIN_CYCLES, Series, evenly_spaced
-from vibinverse.kalman import filter_two_states, gain_change, held_update, is_calm, njit, unique_steps
+from vibinverse.kalman import filter_two_states, njit, unique_steps
 from vibinverse.models.base import (
     LineTest,
     SignalModel,
@@ -324,252 +325,12 @@ def _fill_tables(kinds, pars, offsets, steps, phis, qs, p0):  # pragma: no cover
 
 
 @njit(cache=True, fastmath=False, nogil=True)
-def _predict_cov(p, phi, q, bs, bz):  # pragma: no cover - compiled
-    """P <- Phi P Phi^T + Q in place, Phi and Q block diagonal (block b: states bs[b] .. bs[b] +
-    bz[b] - 1, bz 1 or 2), block pair by block pair in closed form (the upper triangle, mirrored)."""
-    nb = bs.shape[0]
-    for a in range(nb):
-        oa = bs[a]
-        a00 = phi[oa, oa]
-        if bz[a] == 2:
-            a01, a10, a11 = phi[oa, oa + 1], phi[oa + 1, oa], phi[oa + 1, oa + 1]
-        else:
-            a01 = a10 = a11 = 0.0
-        for b in range(a, nb):
-            ob = bs[b]
-            b00 = phi[ob, ob]
-            if bz[a] == 2 and bz[b] == 2:
-                b01, b10, b11 = phi[ob, ob + 1], phi[ob + 1, ob], phi[ob + 1, ob + 1]
-                p00, p01, p10, p11 = p[oa, ob], p[oa, ob + 1], p[oa + 1, ob], p[oa + 1, ob + 1]
-                t00 = a00 * p00 + a01 * p10
-                t01 = a00 * p01 + a01 * p11
-                t10 = a10 * p00 + a11 * p10
-                t11 = a10 * p01 + a11 * p11
-                m00 = t00 * b00 + t01 * b01
-                m01 = t00 * b10 + t01 * b11
-                m10 = t10 * b00 + t11 * b01
-                m11 = t10 * b10 + t11 * b11
-                if a == b:
-                    m00 += q[oa, oa]
-                    m01 += q[oa, oa + 1]
-                    m11 += q[oa + 1, oa + 1]
-                    m10 = m01
-                p[oa, ob] = m00
-                p[oa, ob + 1] = m01
-                p[oa + 1, ob] = m10
-                p[oa + 1, ob + 1] = m11
-                p[ob, oa] = m00
-                p[ob + 1, oa] = m01
-                p[ob, oa + 1] = m10
-                p[ob + 1, oa + 1] = m11
-            elif bz[a] == 2:  # b is 1 x 1
-                m0 = (a00 * p[oa, ob] + a01 * p[oa + 1, ob]) * b00
-                m1 = (a10 * p[oa, ob] + a11 * p[oa + 1, ob]) * b00
-                p[oa, ob] = m0
-                p[oa + 1, ob] = m1
-                p[ob, oa] = m0
-                p[ob, oa + 1] = m1
-            elif bz[b] == 2:  # a is 1 x 1
-                b01, b10, b11 = phi[ob, ob + 1], phi[ob + 1, ob], phi[ob + 1, ob + 1]
-                m0 = a00 * (p[oa, ob] * b00 + p[oa, ob + 1] * b01)
-                m1 = a00 * (p[oa, ob] * b10 + p[oa, ob + 1] * b11)
-                p[oa, ob] = m0
-                p[oa, ob + 1] = m1
-                p[ob, oa] = m0
-                p[ob + 1, oa] = m1
-            else:
-                m = a00 * p[oa, ob] * b00
-                if a == b:
-                    m += q[oa, oa]
-                p[oa, ob] = m
-                p[ob, oa] = m
-
-
-@njit(cache=True, fastmath=False, nogil=True)
-def _block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, nscaled):  # pragma: no cover - compiled
-    """log p(y) of x_k = Phi_k x_{k-1} + w_k, y_k = h . x_k + v_k with block-diagonal Phi_k
-    (= phis[idx[k]]; state i's block is lo[i]..hi[i]) and Q_k, x_0 ~ N(0, P0); NaN gaps skipped.
-    Writes the standardized innovations to `white` and each sample's log density to `lls` when
-    they are not empty (NaN at gaps). With `freeze` = m > 0, the gain and the innovation variance
-    are held once they have stopped changing over m consecutive observed samples of the same step
-    (`kalman.is_calm`: each change, extrapolated geometrically, below FREEZE_TOL of their scale,
-    or at rounding: the Riccati recursion's fixed point to rounding), until a gap or another step
-    (module docstring).
-    m spans the slowest mode's period: with lightly damped modes the recursion converges with
-    an oscillation, whose changes dip towards 0 twice a period long before it has converged; a
-    test on one pair of samples then held a gain 0.003 off in log-likelihood, and the likelihood
-    jumped by that much between neighbouring parameter values (a finite-difference Hessian of
-    6e7 where the curvature is 60). 0: never held. `hm` (empty, or one value per
-    sample): the gain drift, multiplying the observation of states 0..nscaled-1 (the modes) at each
-    sample; the gain then changes every sample, so it is never held (`freeze` must be False)."""
-    n = phis.shape[1]
-    hk = h.copy()
-    vary = hm.shape[0] > 0
-    nb = 0
-    for i in range(n):
-        nb += lo[i] == i
-    bs = np.zeros(nb, dtype=np.int64)
-    bz = np.zeros(nb, dtype=np.int64)
-    b = 0
-    for i in range(n):
-        if lo[i] == i:
-            bs[b] = i
-            bz[b] = hi[i] - i
-            b += 1
-    nobs = 0
-    for i in range(n):
-        nobs += h[i] != 0.0
-    seen = np.zeros(nobs, dtype=np.int64)
-    b = 0
-    for i in range(n):
-        if h[i] != 0.0:
-            seen[b] = i
-            b += 1
-    x = np.zeros(n)
-    xp = np.zeros(n)
-    p = p0.copy()
-    pf = np.zeros((n, n))
-    ph = np.zeros(n)
-    gain = np.zeros(n)
-    prev_gain = np.zeros(n)
-    prev_s = 0.0
-    have_prev = False
-    prev_u = -1
-    last_delta = np.inf
-    frozen = False
-    calm = 0  # consecutive samples that met the hold's test
-    fu = -1
-    sf = 1.0
-    log_norm = 0.0
-    ll = 0.0
-    u = 0
-    for k in range(y.shape[0]):
-        yk = y[k]
-        observed = yk == yk
-        if k > 0:
-            u = idx[k]
-            for i in range(n):
-                acc = 0.0
-                for m in range(lo[i], hi[i]):
-                    acc += phis[u, i, m] * x[m]
-                xp[i] = acc
-            for i in range(n):
-                x[i] = xp[i]
-            if frozen and (u != fu or not observed):
-                frozen = False
-                for i in range(n):
-                    for j in range(n):
-                        p[i, j] = pf[i, j]
-                have_prev = False
-                last_delta = np.inf
-            if frozen:
-                v = held_update(x, h, gain, yk)
-                lk = log_norm - 0.5 * v * v / sf
-                ll += lk
-                if lls.shape[0]:
-                    lls[k] = lk
-                if white.shape[0]:
-                    white[k] = v / math.sqrt(sf)
-                continue
-            _predict_cov(p, phis[u], qs[u], bs, bz)
-        if not observed:
-            have_prev = False
-            if white.shape[0]:
-                white[k] = np.nan
-            if lls.shape[0]:
-                lls[k] = np.nan
-            continue
-        if vary:
-            for i in range(nscaled):
-                hk[i] = h[i] * hm[k]
-        s = r
-        v = yk
-        for i in range(n):
-            acc = 0.0
-            for jj in range(nobs):
-                acc += p[i, seen[jj]] * hk[seen[jj]]
-            ph[i] = acc
-        for jj in range(nobs):
-            s += hk[seen[jj]] * ph[seen[jj]]
-            v -= hk[seen[jj]] * x[seen[jj]]
-        if not s > 0.0:
-            if lls.shape[0]:
-                lls[k:] = -np.inf
-            return -np.inf
-        for i in range(n):
-            x[i] += ph[i] * v / s
-        for i in range(n):
-            g = ph[i] / s
-            for j in range(i, n):
-                d = p[i, j] - g * ph[j]
-                p[i, j] = d
-                p[j, i] = d
-        lk = -0.5 * (math.log(s) + _LOG_2PI + v * v / s)
-        ll += lk
-        if lls.shape[0]:
-            lls[k] = lk
-        if white.shape[0]:
-            white[k] = v / math.sqrt(s)
-        if freeze:
-            if have_prev and u == prev_u:
-                delta = gain_change(ph, s, prev_gain, prev_s)
-                calm = calm + 1 if is_calm(delta, last_delta) else 0
-                if calm >= freeze:
-                    calm = 0
-                    frozen = True
-                    fu = u
-                    sf = s
-                    log_norm = -0.5 * (math.log(s) + _LOG_2PI)
-                    for i in range(n):
-                        gain[i] = ph[i] / s
-                        for j in range(n):
-                            pf[i, j] = p[i, j]
-                last_delta = delta
-            else:
-                calm = 0
-            for i in range(n):
-                prev_gain[i] = ph[i] / s
-            prev_s = s
-            prev_u = u
-            have_prev = True
-    return ll
-
-
-@njit(cache=True, fastmath=False, nogil=True)
-def _propagate(phis, roots, idx, lo, hi, x0, z, h, out):  # pragma: no cover - compiled; tested by moments
-    """out[k] = h . x_k with x_k = Phi_k x_{k-1} + S_k z_k (S_k S_k^T = Q_k, block diagonal)."""
-    n = phis.shape[1]
-    x = x0.copy()
-    xp = np.zeros(n)
-    for k in range(out.shape[0]):
-        if k > 0:
-            u = idx[k]
-            for i in range(n):
-                acc = 0.0
-                for m in range(lo[i], hi[i]):
-                    acc += phis[u, i, m] * x[m] + roots[u, i, m] * z[k, m]
-                xp[i] = acc
-            for i in range(n):
-                x[i] = xp[i]
-        acc = 0.0
-        for i in range(n):
-            acc += h[i] * x[i]
-        out[k] = acc
-
-
-@njit(cache=True, fastmath=False, nogil=True)
 def _lines_mean(t, level, f, a, ph, out):  # pragma: no cover - compiled
     for k in range(t.shape[0]):
         acc = level
         for j in range(f.shape[0]):
             acc += a[j] * math.cos(2.0 * math.pi * f[j] * t[k] + ph[j])
         out[k] = acc
-
-
-def _root(cov: np.ndarray) -> np.ndarray:
-    """Symmetric square roots of a stack of positive semi-definite matrices."""
-    lam, vec = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, -1, -2)))
-    return (vec * np.sqrt(np.clip(lam, 0.0, None))[..., None, :]) @ np.swapaxes(vec, -1, -2)
 
 
 def wrap_phase(phase: float) -> float:
@@ -882,7 +643,7 @@ class ModalModel(SignalModel):
             hold = self.hold(values) if freeze else 0
             return float(filter_two_states(self.y - mean, phis, qs, self.idx, self.h, r, p0, white, lls, hold))
         return float(
-            _block_filter(
+            block_filter(
                 self.y - mean,
                 phis,
                 qs,
@@ -902,7 +663,7 @@ class ModalModel(SignalModel):
 
     def hold(self, values: dict[str, float]) -> int:
         """Samples over which the filter's gain must stay converged before it is held
-        (`_block_filter`'s `freeze`): one period of the slowest mode at the shortest step, plus one;
+        (`block_filter`'s `freeze`): one period of the slowest mode at the shortest step, plus one;
         1 without modes (walks and Ornstein-Uhlenbeck states converge without oscillating)."""
         if not self.spec.modes:
             return 1
@@ -986,19 +747,8 @@ class ModalModel(SignalModel):
         walk at 0), plus the white noise; NaN at the data's gaps. Compiled, one pass."""
         mean, phis, qs, r, p0 = self.tables(values)
         hm = self._scratch()[5].copy()
-        x0 = _root(p0) @ rng.standard_normal(self._nstate)
-        z = rng.standard_normal((self.t.size, self._nstate))
-        roots = np.ascontiguousarray(_root(qs))
-        out = np.empty(self.t.size)
-        if hm.size:  # the modes' part times 1 + g, the nuisance states' as they are
-            seen_modes = np.where(np.arange(self.h.size) < self.n_scaled, self.h, 0.0)
-            _propagate(phis, roots, self.idx, self.lo, self.hi, x0, z, seen_modes, out)
-            rest = np.empty(self.t.size)
-            _propagate(phis, roots, self.idx, self.lo, self.hi, x0, z, self.h - seen_modes, rest)
-            out = hm * out + rest
-        else:
-            _propagate(phis, roots, self.idx, self.lo, self.hi, x0, z, self.h, out)
-        out += mean + math.sqrt(r) * rng.standard_normal(self.t.size)
+        out = simulate_blocks(phis, qs, self.idx, self.lo, self.hi, self.h, r, p0, rng, hm=hm, nscaled=self.n_scaled)
+        out += mean
         out[~self.good] = np.nan
         return out
 

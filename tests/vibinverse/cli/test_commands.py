@@ -200,6 +200,19 @@ def test_fit_bad_input_is_one_line_exit_2(short_data, tmp_path, args, message):
     assert list(tmp_path.iterdir()) == []  # not even the output directory
 
 
+def test_cli_fits_a_scene_beside_nuisance_terms(short_data, tmp_path):
+    """`fit --scene S --noise ar1 --drift walk`: the frame's tilt beside AR(1) noise and a drift,
+    the terms in the summary's model."""
+    data = str(short_data / "series.csv")
+    r = run_cli(
+        "fit", data, "--scene", FRAME, "--noise", "ar1", "--drift", "walk", "--method", "map", "-o", "r", cwd=tmp_path
+    )
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert {"ar.rms", "ar.time", "drift.rate"} <= set(summary["parameters"])
+    assert summary["data"]["model"]["terms"] == "AR(1) noise, random-walk drift, white noise"
+
+
 @pytest.mark.slow
 def test_cli_fits_a_plate_and_refuses_sindy(tmp_path):
     scene = SCENES / "roof_elastic.toml"

@@ -13,6 +13,7 @@ from scipy.linalg import expm
 
 import vibinverse as vi
 from vibinverse import detection
+from vibinverse.engines.kalman import block_filter
 from vibinverse.errors import SceneError
 from vibinverse.kalman import log_likelihood_steps_reference
 from vibinverse.models import MODELS, model_class_for
@@ -20,7 +21,6 @@ from vibinverse.models.modal import (
     FLICKER_MIN_TERMS,
     ModalModel,
     ModalSpec,
-    _block_filter,
     _fill_tables,
     _oscillator,
     flicker_terms,
@@ -172,7 +172,7 @@ def test_held_gain_saves_work_and_keeps_the_numbers():
     mean, phis, qs, r, p0 = m.tables(values)
     e = np.empty(0)
     args = (s.intensity - mean, phis, qs, m.idx, m.lo, m.hi, m.h, r, p0)
-    held, full = _block_filter(*args, m.hold(values), e, e, e, 0), _block_filter(*args, 0, e, e, e, 0)
+    held, full = block_filter(*args, m.hold(values), e, e, e, 0), block_filter(*args, 0, e, e, e, 0)
     assert held == pytest.approx(full, rel=1e-12)
 
 

@@ -1,0 +1,1 @@
+"""Likelihood engines: the one Kalman recursion every composed model runs on (`kalman`)."""

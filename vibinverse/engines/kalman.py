@@ -1,0 +1,346 @@
+"""The state-space engine: one Kalman recursion for every model composed of terms
+(`vibinverse.terms`), whose transition and process noise are block diagonal.
+
+    x_k = Phi_k x_{k-1} + w_k,  w_k ~ N(0, Q_k);   y_k = m_k h_s . x_k + h_n . x_k + v_k,  v_k ~ N(0, r)
+
+Phi_k = phis[idx[k]] and Q_k = qs[idx[k]] (one table per distinct time step: a uniform grid has
+one, irregular stamps a few); each state i belongs to the block lo[i]..hi[i] (1 x 1 or 2 x 2: an
+oscillator, a walk, an integrated walk, an Ornstein-Uhlenbeck state). NaN samples are gaps: the
+update is skipped and the likelihood is that of the observed samples. `m_k` (`hm`, optional) is a
+multiplicative gain drift on the first `nscaled` states (the signal terms). The covariance is
+propagated block pair by block pair in closed form (`predict_block_covariance`, O(n^2) a step
+instead of O(n^3)), and once the Riccati recursion has reached its fixed point the gain is held
+until a gap or another step (`vibinverse.kalman.is_calm`): O(n) a step from there, the same numbers
+to rounding. `block_filter` is the recursion, `propagate_blocks` draws the process at the same
+steps, `run_blocks` is the Python entry.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vibinverse.kalman import gain_change, held_update, is_calm, njit
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def predict_block_covariance(p, phi, q, bs, bz):  # pragma: no cover - compiled
+    """P <- Phi P Phi^T + Q in place, Phi and Q block diagonal (block b: states bs[b] .. bs[b] +
+    bz[b] - 1, bz 1 or 2), block pair by block pair in closed form (the upper triangle, mirrored)."""
+    nb = bs.shape[0]
+    for a in range(nb):
+        oa = bs[a]
+        a00 = phi[oa, oa]
+        if bz[a] == 2:
+            a01, a10, a11 = phi[oa, oa + 1], phi[oa + 1, oa], phi[oa + 1, oa + 1]
+        else:
+            a01 = a10 = a11 = 0.0
+        for b in range(a, nb):
+            ob = bs[b]
+            b00 = phi[ob, ob]
+            if bz[a] == 2 and bz[b] == 2:
+                b01, b10, b11 = phi[ob, ob + 1], phi[ob + 1, ob], phi[ob + 1, ob + 1]
+                p00, p01, p10, p11 = p[oa, ob], p[oa, ob + 1], p[oa + 1, ob], p[oa + 1, ob + 1]
+                t00 = a00 * p00 + a01 * p10
+                t01 = a00 * p01 + a01 * p11
+                t10 = a10 * p00 + a11 * p10
+                t11 = a10 * p01 + a11 * p11
+                m00 = t00 * b00 + t01 * b01
+                m01 = t00 * b10 + t01 * b11
+                m10 = t10 * b00 + t11 * b01
+                m11 = t10 * b10 + t11 * b11
+                if a == b:
+                    m00 += q[oa, oa]
+                    m01 += q[oa, oa + 1]
+                    m11 += q[oa + 1, oa + 1]
+                    m10 = m01
+                p[oa, ob] = m00
+                p[oa, ob + 1] = m01
+                p[oa + 1, ob] = m10
+                p[oa + 1, ob + 1] = m11
+                p[ob, oa] = m00
+                p[ob + 1, oa] = m01
+                p[ob, oa + 1] = m10
+                p[ob + 1, oa + 1] = m11
+            elif bz[a] == 2:  # b is 1 x 1
+                m0 = (a00 * p[oa, ob] + a01 * p[oa + 1, ob]) * b00
+                m1 = (a10 * p[oa, ob] + a11 * p[oa + 1, ob]) * b00
+                p[oa, ob] = m0
+                p[oa + 1, ob] = m1
+                p[ob, oa] = m0
+                p[ob, oa + 1] = m1
+            elif bz[b] == 2:  # a is 1 x 1
+                b01, b10, b11 = phi[ob, ob + 1], phi[ob + 1, ob], phi[ob + 1, ob + 1]
+                m0 = a00 * (p[oa, ob] * b00 + p[oa, ob + 1] * b01)
+                m1 = a00 * (p[oa, ob] * b10 + p[oa, ob + 1] * b11)
+                p[oa, ob] = m0
+                p[oa, ob + 1] = m1
+                p[ob, oa] = m0
+                p[ob + 1, oa] = m1
+            else:
+                m = a00 * p[oa, ob] * b00
+                if a == b:
+                    m += q[oa, oa]
+                p[oa, ob] = m
+                p[ob, oa] = m
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, nscaled):  # pragma: no cover - compiled
+    """log p(y) of x_k = Phi_k x_{k-1} + w_k, y_k = h . x_k + v_k with block-diagonal Phi_k
+    (= phis[idx[k]]; state i's block is lo[i]..hi[i]) and Q_k, x_0 ~ N(0, P0); NaN gaps skipped.
+    Writes the standardized innovations to `white` and each sample's log density to `lls` when
+    they are not empty (NaN at gaps). With `freeze` = m > 0, the gain and the innovation variance
+    are held once they have stopped changing over m consecutive observed samples of the same step
+    (`kalman.is_calm`: each change, extrapolated geometrically, below FREEZE_TOL of their scale,
+    or at rounding: the Riccati recursion's fixed point to rounding), until a gap or another step
+    (module docstring).
+    m spans the slowest mode's period: with lightly damped modes the recursion converges with
+    an oscillation, whose changes dip towards 0 twice a period long before it has converged; a
+    test on one pair of samples then held a gain 0.003 off in log-likelihood, and the likelihood
+    jumped by that much between neighbouring parameter values (a finite-difference Hessian of
+    6e7 where the curvature is 60). 0: never held. `hm` (empty, or one value per
+    sample): the gain drift, multiplying the observation of states 0..nscaled-1 (the modes) at each
+    sample; the gain then changes every sample, so it is never held (`freeze` must be False)."""
+    n = phis.shape[1]
+    hk = h.copy()
+    vary = hm.shape[0] > 0
+    nb = 0
+    for i in range(n):
+        nb += lo[i] == i
+    bs = np.zeros(nb, dtype=np.int64)
+    bz = np.zeros(nb, dtype=np.int64)
+    b = 0
+    for i in range(n):
+        if lo[i] == i:
+            bs[b] = i
+            bz[b] = hi[i] - i
+            b += 1
+    nobs = 0
+    for i in range(n):
+        nobs += h[i] != 0.0
+    seen = np.zeros(nobs, dtype=np.int64)
+    b = 0
+    for i in range(n):
+        if h[i] != 0.0:
+            seen[b] = i
+            b += 1
+    x = np.zeros(n)
+    xp = np.zeros(n)
+    p = p0.copy()
+    pf = np.zeros((n, n))
+    ph = np.zeros(n)
+    gain = np.zeros(n)
+    prev_gain = np.zeros(n)
+    prev_s = 0.0
+    have_prev = False
+    prev_u = -1
+    last_delta = np.inf
+    frozen = False
+    calm = 0  # consecutive samples that met the hold's test
+    fu = -1
+    sf = 1.0
+    log_norm = 0.0
+    ll = 0.0
+    u = 0
+    for k in range(y.shape[0]):
+        yk = y[k]
+        observed = yk == yk
+        if k > 0:
+            u = idx[k]
+            for i in range(n):
+                acc = 0.0
+                for m in range(lo[i], hi[i]):
+                    acc += phis[u, i, m] * x[m]
+                xp[i] = acc
+            for i in range(n):
+                x[i] = xp[i]
+            if frozen and (u != fu or not observed):
+                frozen = False
+                for i in range(n):
+                    for j in range(n):
+                        p[i, j] = pf[i, j]
+                have_prev = False
+                last_delta = np.inf
+            if frozen:
+                v = held_update(x, h, gain, yk)
+                lk = log_norm - 0.5 * v * v / sf
+                ll += lk
+                if lls.shape[0]:
+                    lls[k] = lk
+                if white.shape[0]:
+                    white[k] = v / math.sqrt(sf)
+                continue
+            predict_block_covariance(p, phis[u], qs[u], bs, bz)
+        if not observed:
+            have_prev = False
+            if white.shape[0]:
+                white[k] = np.nan
+            if lls.shape[0]:
+                lls[k] = np.nan
+            continue
+        if vary:
+            for i in range(nscaled):
+                hk[i] = h[i] * hm[k]
+        s = r
+        v = yk
+        for i in range(n):
+            acc = 0.0
+            for jj in range(nobs):
+                acc += p[i, seen[jj]] * hk[seen[jj]]
+            ph[i] = acc
+        for jj in range(nobs):
+            s += hk[seen[jj]] * ph[seen[jj]]
+            v -= hk[seen[jj]] * x[seen[jj]]
+        if not s > 0.0:
+            if lls.shape[0]:
+                lls[k:] = -np.inf
+            return -np.inf
+        for i in range(n):
+            x[i] += ph[i] * v / s
+        for i in range(n):
+            g = ph[i] / s
+            for j in range(i, n):
+                d = p[i, j] - g * ph[j]
+                p[i, j] = d
+                p[j, i] = d
+        lk = -0.5 * (math.log(s) + _LOG_2PI + v * v / s)
+        ll += lk
+        if lls.shape[0]:
+            lls[k] = lk
+        if white.shape[0]:
+            white[k] = v / math.sqrt(s)
+        if freeze:
+            if have_prev and u == prev_u:
+                delta = gain_change(ph, s, prev_gain, prev_s)
+                calm = calm + 1 if is_calm(delta, last_delta) else 0
+                if calm >= freeze:
+                    calm = 0
+                    frozen = True
+                    fu = u
+                    sf = s
+                    log_norm = -0.5 * (math.log(s) + _LOG_2PI)
+                    for i in range(n):
+                        gain[i] = ph[i] / s
+                        for j in range(n):
+                            pf[i, j] = p[i, j]
+                last_delta = delta
+            else:
+                calm = 0
+            for i in range(n):
+                prev_gain[i] = ph[i] / s
+            prev_s = s
+            prev_u = u
+            have_prev = True
+    return ll
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def propagate_blocks(phis, roots, idx, lo, hi, x0, z, h, out):  # pragma: no cover - compiled; tested by moments
+    """out[k] = h . x_k with x_k = Phi_k x_{k-1} + S_k z_k (S_k S_k^T = Q_k, block diagonal)."""
+    n = phis.shape[1]
+    x = x0.copy()
+    xp = np.zeros(n)
+    for k in range(out.shape[0]):
+        if k > 0:
+            u = idx[k]
+            for i in range(n):
+                acc = 0.0
+                for m in range(lo[i], hi[i]):
+                    acc += phis[u, i, m] * x[m] + roots[u, i, m] * z[k, m]
+                xp[i] = acc
+            for i in range(n):
+                x[i] = xp[i]
+        acc = 0.0
+        for i in range(n):
+            acc += h[i] * x[i]
+        out[k] = acc
+
+
+def run_blocks(
+    y: np.ndarray,
+    phis: np.ndarray,
+    qs: np.ndarray,
+    idx: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    h: np.ndarray,
+    r: float,
+    p0: np.ndarray,
+    *,
+    hold: int = 0,
+    white: np.ndarray | None = None,
+    lls: np.ndarray | None = None,
+    hm: np.ndarray | None = None,
+    nscaled: int = 0,
+) -> float:
+    """log p(y) by `block_filter` (arguments as there; `white` and `lls`, when given, receive the
+    standardized innovations and each sample's log density; `hm` the gain drift on the first
+    `nscaled` states, which disables the hold)."""
+    empty = np.empty(0)
+    hm = empty if hm is None else np.ascontiguousarray(hm, dtype=np.float64)
+    c = lambda a: np.ascontiguousarray(a, dtype=np.float64)
+    i = lambda a: np.ascontiguousarray(a, dtype=np.int64)
+    return float(
+        block_filter(
+            c(y),
+            c(phis),
+            c(qs),
+            i(idx),
+            i(lo),
+            i(hi),
+            c(h),
+            float(r),
+            c(p0),
+            0 if hm.size else int(hold),
+            empty if white is None else white,
+            empty if lls is None else lls,
+            hm,
+            int(nscaled),
+        )
+    )
+
+
+def _root(cov: np.ndarray) -> np.ndarray:
+    """Symmetric square roots S (S S^T = cov) of a stack of positive semi-definite matrices."""
+    lam, vec = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    return (vec * np.sqrt(np.clip(lam, 0.0, None))[..., None, :]) @ np.swapaxes(vec, -1, -2)
+
+
+def simulate_blocks(
+    phis: np.ndarray,
+    qs: np.ndarray,
+    idx: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    h: np.ndarray,
+    r: float,
+    p0: np.ndarray,
+    rng: np.random.Generator,
+    *,
+    hm: np.ndarray | None = None,
+    nscaled: int = 0,
+) -> np.ndarray:
+    """A draw of y_k (without a mean) of the model `block_filter` evaluates, states started in
+    N(0, P0), at every sample of `idx` (gaps are the caller's to mark): the first `nscaled` states'
+    part times the gain drift `hm` when given, the others' as they are, plus the white noise.
+    Compiled, one pass."""
+    n, t = phis.shape[1], idx.size
+    x0 = _root(np.asarray(p0, dtype=float)) @ rng.standard_normal(n)
+    z = rng.standard_normal((t, n))
+    roots = np.ascontiguousarray(_root(np.asarray(qs, dtype=float)))
+    phis, idx = np.ascontiguousarray(phis, dtype=np.float64), np.ascontiguousarray(idx, dtype=np.int64)
+    lo, hi, h = np.ascontiguousarray(lo, dtype=np.int64), np.ascontiguousarray(hi, dtype=np.int64), np.asarray(h)
+    out = np.empty(t)
+    if hm is not None and hm.size:
+        scaled = np.where(np.arange(h.size) < nscaled, h, 0.0)
+        propagate_blocks(phis, roots, idx, lo, hi, x0, z, scaled, out)
+        rest = np.empty(t)
+        propagate_blocks(phis, roots, idx, lo, hi, x0, z, h - scaled, rest)
+        out = hm * out + rest
+    else:
+        propagate_blocks(phis, roots, idx, lo, hi, x0, z, np.ascontiguousarray(h, dtype=np.float64), out)
+    return out + math.sqrt(r) * rng.standard_normal(t)
