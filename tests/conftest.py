@@ -98,6 +98,18 @@ def series(table: dict, seed: int, gaps: float = 0.0) -> Series:
     return Series(obs.time, y, f"seed {seed}", scene=table)
 
 
+def frame_series(table: dict, seed: int, ar: tuple[float, float] | None = None) -> Series:
+    """A series of the frame scene `table`, with AR(1) sensor noise (phi, sd) added when `ar` is
+    given (the robustness bench's independent simulator, `robustness_cases.ar1`)."""
+    from vibinverse.bench.robustness_cases import ar1
+
+    obs = observe(scene_from_table(table), seed)
+    y = obs.intensity.copy()
+    if ar is not None:
+        y += ar1(y.size, *ar, np.random.default_rng(1000 + seed))
+    return Series(obs.time, y, f"seed {seed}", scene=table)
+
+
 # ------------------------------------------------------------------ the deterministic model (plate roof, ground waves)
 
 

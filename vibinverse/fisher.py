@@ -17,24 +17,21 @@ which are smooth closed forms: there is no simulated noise in them.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 from scipy.linalg import toeplitz
 
+from vibinverse.engines.state_space import Components
 from vibinverse.errors import InputError
 from vibinverse.kalman import whiten
-
-if TYPE_CHECKING:
-    from vibinverse.models.deterministic import DeterministicModel
-    from vibinverse.models.frame import Components, FrameModel
 
 
 def _step(values: dict[str, float], name: str, rel_step: float) -> float:
     return rel_step * max(abs(values[name]), 1e-3)
 
 
-def mean_fisher(like: FrameModel, values: dict[str, float], names: list[str], rel_step: float = 1e-6) -> np.ndarray:
+def mean_fisher(like: Any, values: dict[str, float], names: list[str], rel_step: float = 1e-6) -> np.ndarray:
     """Fisher information of `names` through the mean (the drive parameters enter only there)."""
     c = like.components(values)
     white = []
@@ -83,7 +80,7 @@ def oversampling(c: Components, n: int, points_per_width: int = 4, limit: int = 
 
 
 def covariance_fisher(
-    like: FrameModel, values: dict[str, float], names: list[str], rel_step: float = 1e-6, oversample: int | None = None
+    like: Any, values: dict[str, float], names: list[str], rel_step: float = 1e-6, oversample: int | None = None
 ) -> np.ndarray:
     """Whittle's Fisher information of `names` through the covariance, (T / 4 pi) times the
     integral of d_i log S d_j log S over the circle, scaled by the fraction of samples observed
@@ -104,7 +101,7 @@ def covariance_fisher(
 
 
 def covariance_fisher_dense(
-    like: FrameModel, values: dict[str, float], names: list[str], rel_step: float = 1e-6
+    like: Any, values: dict[str, float], names: list[str], rel_step: float = 1e-6
 ) -> np.ndarray:
     """The exact covariance term tr(Sigma^-1 d_i Sigma Sigma^-1 d_j Sigma) / 2 from the explicit
     T x T covariance (O(T^3): an oracle for short series, not for design sweeps)."""
@@ -131,7 +128,7 @@ def covariance_fisher_dense(
     return 0.5 * np.array([[np.sum(ai * aj.T) for aj in a] for ai in a])
 
 
-def frame_fisher(like: FrameModel, values: dict[str, float], names: list[str]) -> np.ndarray:
+def frame_fisher(like: Any, values: dict[str, float], names: list[str]) -> np.ndarray:
     """Mean plus covariance Fisher information of `names`."""
     return mean_fisher(like, values, names) + covariance_fisher(like, values, names)
 
@@ -151,16 +148,14 @@ def crlb_from_fisher(fisher: np.ndarray, names: list[str]) -> dict[str, float]:
     return dict(zip(names, sd.tolist()))
 
 
-def crlb_sd(like: FrameModel, values: dict[str, float], names: list[str], covariance: bool = False) -> dict[str, float]:
+def crlb_sd(like: Any, values: dict[str, float], names: list[str], covariance: bool = False) -> dict[str, float]:
     """Cramer-Rao standard deviations of `names` (jointly estimated); with `covariance`, the
     information carried by the noise-driven resonances is counted too."""
     fisher = frame_fisher(like, values, names) if covariance else mean_fisher(like, values, names)
     return crlb_from_fisher(fisher, names)
 
 
-def response_fisher(
-    like: DeterministicModel, values: dict[str, float], names: list[str], rel_step: float = 1e-6
-) -> np.ndarray:
+def response_fisher(like: Any, values: dict[str, float], names: list[str], rel_step: float = 1e-6) -> np.ndarray:
     """Fisher information of a deterministic scene's parameters (`DeterministicModel`): the mean
     term D^T diag(1/var) D over the observed samples, with D = d mu / d theta differenced on the
     AC part and the rest level separately (a 1e-12 signal keeps its digits), plus the variance

@@ -100,21 +100,21 @@ def with_nuisance(
     (`vibinverse.terms.nuisance.NuisanceSpec`; one-line errors for bad values)."""
     if not nuisance:
         return scene
-    from vibinverse.terms.nuisance import NuisanceSpec
+    from vibinverse.terms.nuisance import SPEC_KEYS, NuisanceSpec
 
-    unknown = sorted(set(nuisance) - {"noise", "drift", "gain", "white"})
+    unknown = sorted(set(nuisance) - set(SPEC_KEYS))
     if unknown:
         raise InputError(f"{unknown[0]}: not a nuisance term; allowed: noise, drift, gain, white")
     table = {"modal": {}} if scene is None else scene_table(scene, overrides)
     key = "modal" if modal else "nuisance"
     section = dict(table.get(key) or {})
-    merged = {k: v for k, v in {**section, **nuisance}.items() if k in ("noise", "drift", "gain", "white")}
+    merged = {k: v for k, v in {**section, **nuisance}.items() if k in SPEC_KEYS}
     with scene_errors():
         spec = NuisanceSpec.from_table({key: merged}, key)  # one-line errors naming the key
     written = spec.table()
     section.update({k: written[k] for k in nuisance})
     if modal and "drift" in nuisance:  # the modal table's spelling: false or the kind
-        section["drift"] = spec.drift != "none" and spec.drift
+        section["drift"] = spec.drifting and spec.drift
     table[key] = section
     return table
 

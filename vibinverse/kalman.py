@@ -20,26 +20,17 @@ one-step predictive log density, `simulate` draws the state process at the same 
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import expm, solve_discrete_lyapunov
 
-try:
-    import numba
-    from numba import njit
-except ImportError:  # pragma: no cover - numba is a dependency; this keeps the module importable
-
-    def njit(*args, **kwargs):
-        return (lambda f: f) if not (args and callable(args[0])) else args[0]
-else:
-    if not numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR unset: compiled kernels go to the user's cache,
-        # never into the installed package (a later editable install would leave them as a shadow package)
-        numba.config.CACHE_DIR = os.path.join(
-            os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "vibinverse", "numba"
-        )
-
+from vibinverse.engines.kalman import (  # the one recursion; its hold test and compiler live there
+    block_layout,
+    is_calm,
+    njit,
+    run_blocks,
+)
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -141,178 +132,16 @@ def discretize_continuous(
 # ------------------------------------------------------------------ per-step (Phi, Q): irregular stamps
 
 
-FREEZE_TOL = 1e-14  # the filter holds its gain once the covariance has converged to this (relative)
-FREEZE_ROUNDING = 1e-15  # a relative change this small is rounding: it counts as converged
-
-
-@njit(cache=True, fastmath=False, nogil=True)
-def gain_change(ph, s, prev_gain, prev_s):  # pragma: no cover - compiled; tested through the filter
-    """The relative change of the Kalman gain ph / s and the innovation variance s since the last
-    observed sample (prev_gain, prev_s): the largest change of a gain entry over the largest gain,
-    and of s over s."""
-    n = ph.shape[0]
-    scale = 0.0
-    for i in range(n):
-        scale = max(scale, abs(ph[i] / s))
-    delta = abs(s - prev_s) / s
-    for i in range(n):
-        d = abs(ph[i] / s - prev_gain[i])
-        if d > 0.0:
-            delta = max(delta, d / scale)
-    return delta
-
-
-@njit(cache=True, fastmath=False, nogil=True)
-def is_calm(delta, last_delta):  # pragma: no cover - compiled; tested through the filter
-    """Whether a change `delta` after `last_delta` means the recursion has converged: at rounding,
-    or shrinking geometrically with what remains of it (delta^2 / (last - delta), the tail of the
-    geometric series) below FREEZE_TOL."""
-    return delta <= FREEZE_ROUNDING or (
-        delta < last_delta < np.inf and delta * delta <= FREEZE_TOL * (last_delta - delta)
-    )
-
-
-@njit(cache=True, fastmath=False, nogil=True)
-def held_update(x, h, gain, yk):  # pragma: no cover - compiled; tested through the filters
-    """A step with the held gain: the innovation v = yk - h . x, and x += gain v in place; returns v."""
-    v = yk
-    for i in range(x.shape[0]):
-        v -= h[i] * x[i]
-    for i in range(x.shape[0]):
-        x[i] += gain[i] * v
-    return v
-
-
-@njit(cache=True, fastmath=False, nogil=True)
-def filter_steps(
-    y, phis, qs, idx, h, r, p0, white, lls, freeze
-):  # pragma: no cover - compiled; checked against the reference
+def filter_steps(y, phis, qs, idx, h, r, p0, white, lls, freeze) -> float:
     """The Kalman filter with step k's (Phi, Q) = (phis[idx[k]], qs[idx[k]]) (idx empty: phis[0]
-    for every step); writes the standardized innovations to `white` and each sample's log density
-    to `lls` when they are not empty (NaN at gaps). With `freeze` = m > 0, the gain and the
-    innovation variance are held once they have stopped changing over m consecutive observed
-    samples of the same step (`is_calm`: the Riccati recursion's fixed point to rounding), until a
-    gap or another step; then the covariance resumes from the held one. A held step costs O(n)
-    instead of O(n^3): on a long uniform record, almost every step."""
-    n = phis.shape[1]
-    uniform = idx.shape[0] == 0
-    x = np.zeros(n)
-    p = p0.copy()
-    xp = np.zeros(n)
-    pp = np.zeros((n, n))
-    tmp = np.zeros((n, n))
-    ph = np.zeros(n)
-    gain = np.zeros(n)
-    prev_gain = np.zeros(n)
-    pf = np.zeros((n, n))
-    prev_s = 0.0
-    have_prev = False
-    prev_u = -1
-    last_delta = np.inf
-    frozen = False
-    calm = 0
-    fu = -1
-    log_norm, inv_sf, inv_root = 0.0, 1.0, 1.0  # of the held innovation variance
-    ll = 0.0
-    u = 0
-    for k in range(y.shape[0]):
-        yk = y[k]
-        observed = yk == yk  # NaN: a gap
-        if k > 0:
-            u = 0 if uniform else idx[k]
-            for i in range(n):
-                acc = 0.0
-                for j in range(n):
-                    acc += phis[u, i, j] * x[j]
-                xp[i] = acc
-            for i in range(n):
-                x[i] = xp[i]
-            if frozen and (u != fu or not observed):  # the held gain no longer applies
-                frozen = False
-                for i in range(n):
-                    for j in range(n):
-                        p[i, j] = pf[i, j]
-                have_prev = False
-                last_delta = np.inf
-            if frozen:
-                v = held_update(x, h, gain, yk)
-                lk = log_norm - 0.5 * v * v * inv_sf
-                ll += lk
-                if lls.shape[0]:
-                    lls[k] = lk
-                if white.shape[0]:
-                    white[k] = v * inv_root
-                continue
-            for i in range(n):
-                for j in range(n):
-                    acc = 0.0
-                    for m in range(n):
-                        acc += phis[u, i, m] * p[m, j]
-                    tmp[i, j] = acc
-            for i in range(n):
-                for j in range(n):
-                    acc = qs[u, i, j]
-                    for m in range(n):
-                        acc += tmp[i, m] * phis[u, j, m]
-                    pp[i, j] = acc
-            for i in range(n):
-                for j in range(n):
-                    p[i, j] = 0.5 * (pp[i, j] + pp[j, i])
-        if not observed:
-            have_prev = False
-            if white.shape[0]:
-                white[k] = np.nan
-            if lls.shape[0]:
-                lls[k] = np.nan
-            continue
-        s = r
-        v = yk
-        for i in range(n):
-            acc = 0.0
-            for j in range(n):
-                acc += p[i, j] * h[j]
-            ph[i] = acc
-            s += h[i] * acc
-            v -= h[i] * x[i]
-        if not s > 0.0:
-            if lls.shape[0]:
-                lls[k:] = -np.inf
-            return -np.inf
-        for i in range(n):
-            x[i] += ph[i] * v / s
-        for i in range(n):
-            for j in range(n):
-                p[i, j] -= ph[i] * ph[j] / s
-        lk = -0.5 * (math.log(s) + _LOG_2PI + v * v / s)
-        ll += lk
-        if lls.shape[0]:
-            lls[k] = lk
-        if white.shape[0]:
-            white[k] = v / math.sqrt(s)
-        if freeze:
-            if have_prev and u == prev_u:
-                delta = gain_change(ph, s, prev_gain, prev_s)
-                calm = calm + 1 if is_calm(delta, last_delta) else 0
-                if calm >= freeze:
-                    calm = 0
-                    frozen = True
-                    fu = u
-                    log_norm = -0.5 * (math.log(s) + _LOG_2PI)
-                    inv_sf = 1.0 / s
-                    inv_root = 1.0 / math.sqrt(s)
-                    for i in range(n):
-                        gain[i] = ph[i] / s
-                        for j in range(n):
-                            pf[i, j] = p[i, j]
-                last_delta = delta
-            else:
-                calm = 0
-            for i in range(n):
-                prev_gain[i] = ph[i] / s
-            prev_s = s
-            prev_u = u
-            have_prev = True
-    return ll
+    for every step), any number of states: the engine's recursion
+    (`vibinverse.engines.kalman.block_filter`) on the blocks the tables have (`block_layout`: the
+    finest block-diagonal split; a dense model is one block). Writes the standardized innovations to
+    `white` and each sample's log density to `lls` when they are not empty (NaN at gaps); `freeze`
+    = m > 0 holds the converged gain after m calm samples (`is_calm`), until a gap or another step."""
+    idx = np.zeros(len(y), dtype=np.int64) if len(idx) == 0 else idx
+    lo, hi = block_layout(np.asarray(phis), np.asarray(qs), np.asarray(p0))
+    return run_blocks(y, phis, qs, idx, lo, hi, h, r, p0, hold=freeze, white=white, lls=lls)
 
 
 @njit(cache=True, fastmath=False, nogil=True)

@@ -804,6 +804,9 @@ def _diagnostic(v: Any) -> str:
     return _text(v)
 
 
+OWN_SECTIONS = ("sindy", "nuisance_search", "model_order")  # diagnostics the report shows in sections of their own
+
+
 def terms_html(summary: dict) -> str:
     """The model's parts and why: the terms chosen beside a scene's model (or the modal model's
     order), and the search's table: each proposal, its change of BIC, kept or not. Empty when no
@@ -855,7 +858,7 @@ def write_report(result: Path, outdir: Path) -> Path:
     diag = "".join(
         f'<tr><td>{_text(k)}</td><td class="diag">{_diagnostic(val)}</td></tr>'
         for k, val in summary["diagnostics"].items()
-        if k not in ("sindy", "nuisance_search", "model_order")
+        if k not in OWN_SECTIONS
     )
     sindy = summary["diagnostics"].get("sindy")
     if not isinstance(sindy, dict):

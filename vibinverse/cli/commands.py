@@ -349,9 +349,7 @@ def _fit_table(args: argparse.Namespace) -> dict[str, Any]:
                 )
         table = api.load_scene(args.scene, args.set or [])
         nuisance = dict(table.get("nuisance") or {})
-        nuisance.update({k: given[k] for k in ("noise", "drift") if k in given})
-        if "gain" in given:
-            nuisance["gain"] = given["gain"] == "drift"
+        nuisance.update({k: given[k] for k in ("noise", "drift", "gain") if k in given})  # `NuisanceSpec` spellings
         if nuisance:
             table["nuisance"] = nuisance
         return table
@@ -460,6 +458,40 @@ def _bench_robustness(quick: bool) -> tuple[dict, Any]:
     return result, lambda p: plot(result["rows"], p)
 
 
+SCENE_TABLE, SCENE_FITS = "robustness_scene.txt", "robustness_scene_fits.jsonl"
+
+
+def _bench_robustness_scene(args: argparse.Namespace, out: Path, js: Path) -> dict[str, Any]:
+    """--robustness --scene: the scene column (`robustness_scene`) merged into robustness.json under
+    "scene", so that an earlier run's modal columns stay; its table in robustness_scene.txt, and each
+    data set's fits appended to robustness_scene_fits.jsonl as it finishes (a long run keeps them)."""
+    from vibinverse.bench.robustness_bench import with_scene
+    from vibinverse.bench.robustness_scene import SCENE_CASES, run, table
+
+    cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases is not None else None
+    for c in cases or []:
+        if c not in SCENE_CASES:
+            raise InputError(f"--cases: {c!r}; allowed: {', '.join(SCENE_CASES)}")
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers: {args.workers}; allowed: 1 or more")
+    txt, fits = out / SCENE_TABLE, out / SCENE_FITS
+    _check_outputs({js.name: js, txt.name: txt, fits.name: fits}, {})
+    with created(out):
+        previous = None
+        if js.is_file():
+            with contextlib.suppress(ValueError, OSError):
+                previous = jsonio.loads(js.read_text())
+        fits.write_text("")  # this run's records only
+        workers = args.workers if args.workers is not None else min(2, os.cpu_count() or 1)
+        result = run(quick=args.quick, cases=cases, workers=workers, records=fits)
+        text = table(result)
+        logger.info(text)
+        doc = with_scene(previous if isinstance(previous, dict) else None, result)
+        write_all({js: lambda p: p.write_text(jsonio.dumps(doc, indent=2)), txt: lambda p: p.write_text(text + "\n")})
+    logger.info(f'wrote {js} (under "scene"), {txt} and {fits}')
+    return _result(result, [js, txt, fits])
+
+
 def _bench_imaging(quick: bool) -> tuple[dict, Any]:
     """From image cube to answer: the imager, detection throughput and memory, the multi-pixel fit."""
     from vibinverse.bench.imaging_bench import plot, run
@@ -480,9 +512,16 @@ BENCH_MODES: dict[str | None, tuple[str, Any]] = {
 
 def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
     mode = next((m for m in BENCH_MODES if m is not None and getattr(args, m)), None)
+    scene_only = {"--workers": args.workers is not None, "--cases": args.cases is not None}
+    if not args.scene and any(scene_only.values()):
+        raise InputError(f"{next(k for k, v in scene_only.items() if v)}: only with --robustness --scene")
+    if args.scene and mode != "robustness":
+        raise InputError("--scene: the scene column of the robustness bench; give --robustness --scene")
     stem, runner = BENCH_MODES[mode]
     out = output_dir(args.output)
     js, png = out / f"{stem}.json", out / f"{stem}.png"
+    if args.scene:
+        return _bench_robustness_scene(args, out, js)
     _check_outputs({js.name: js, png.name: png}, {})
     with created(out):
         result, plotter = runner(args.quick)
@@ -725,7 +764,8 @@ def build_parser() -> argparse.ArgumentParser:
         bench,
         "bench",
         "bench.json, bench.png (with --estimators: estimators.json, estimators.png; "
-        "with --robustness: robustness.json, robustness.png; with --imaging: imaging.json, imaging.png)",
+        "with --robustness: robustness.json, robustness.png, with --scene robustness.json, robustness_scene.txt, "
+        "robustness_scene_fits.jsonl; with --imaging: imaging.json, imaging.png)",
     )
     which = bench.add_mutually_exclusive_group()
     which.add_argument(
@@ -745,6 +785,20 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="instead: the imager (64 x 64 px x 4000 frames), detection throughput against a numpy rfft and its "
         "peak memory, the multi-pixel fit's cost and sd against the number of pixels (~2 min, --quick ~1 min)",
+    )
+    bench.add_argument(
+        "--scene",
+        action="store_true",
+        help="with --robustness: instead the scene column, the same departures on data simulated from "
+        "roof_frame.toml, fitted with the scene (nuisance terms by BIC, and white noise only) and without it; "
+        'merged into robustness.json under "scene", the table in robustness_scene.txt, the fits in '
+        "robustness_scene_fits.jsonl (50 data sets a case: hours; --quick: 1 data set of 4 fast cases, ~2 min)",
+    )
+    bench.add_argument(
+        "--cases", metavar="A,B", help="with --robustness --scene: these cases only, in this order (default: all)"
+    )
+    bench.add_argument(
+        "--workers", type=int, metavar="N", help="with --robustness --scene: processes (default: min(2, cores))"
     )
     bench.set_defaults(func=cmd_bench)
 

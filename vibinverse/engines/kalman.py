@@ -10,7 +10,7 @@ update is skipped and the likelihood is that of the observed samples. `m_k` (`hm
 multiplicative gain drift on the first `nscaled` states (the signal terms). The covariance is
 propagated block pair by block pair in closed form (`predict_block_covariance`, O(n^2) a step
 instead of O(n^3)), and once the Riccati recursion has reached its fixed point the gain is held
-until a gap or another step (`vibinverse.kalman.is_calm`): O(n) a step from there, the same numbers
+until a gap or another step (`is_calm`): O(n) a step from there, the same numbers
 to rounding. `block_filter` is the recursion, `propagate_blocks` draws the process at the same
 steps, `run_blocks` is the Python entry.
 """
@@ -18,19 +18,99 @@ steps, `run_blocks` is the Python entry.
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
-from vibinverse.kalman import gain_change, held_update, is_calm, njit
+try:
+    import numba
+    from numba import njit
+except ImportError:  # pragma: no cover - numba is a dependency; this keeps the module importable
+
+    def njit(*args, **kwargs):
+        return (lambda f: f) if not (args and callable(args[0])) else args[0]
+else:
+    if not numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR unset: compiled kernels go to the user's cache,
+        # never into the installed package (a later editable install would leave them as a shadow package)
+        numba.config.CACHE_DIR = os.path.join(
+            os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "vibinverse", "numba"
+        )
+
 
 _LOG_2PI = math.log(2.0 * math.pi)
+
+FREEZE_TOL = 1e-14  # the filter holds its gain once the covariance has converged to this (relative)
+FREEZE_ROUNDING = 1e-15  # a relative change this small is rounding: it counts as converged
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def gain_change(ph, s, prev_gain, prev_s):  # pragma: no cover - compiled; tested through the filter
+    """The relative change of the Kalman gain ph / s and the innovation variance s since the last
+    observed sample (prev_gain, prev_s): the largest change of a gain entry over the largest gain,
+    and of s over s."""
+    n = ph.shape[0]
+    scale = 0.0
+    for i in range(n):
+        scale = max(scale, abs(ph[i] / s))
+    delta = abs(s - prev_s) / s
+    for i in range(n):
+        d = abs(ph[i] / s - prev_gain[i])
+        if d > 0.0:
+            delta = max(delta, d / scale)
+    return delta
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def is_calm(delta, last_delta):  # pragma: no cover - compiled; tested through the filter
+    """Whether a change `delta` after `last_delta` means the recursion has converged: at rounding,
+    or shrinking geometrically with what remains of it (delta^2 / (last - delta), the tail of the
+    geometric series) below FREEZE_TOL."""
+    return delta <= FREEZE_ROUNDING or (
+        delta < last_delta < np.inf and delta * delta <= FREEZE_TOL * (last_delta - delta)
+    )
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def held_update(x, h, gain, yk):  # pragma: no cover - compiled; tested through the filters
+    """A step with the held gain: the innovation v = yk - h . x, and x += gain v in place; returns v."""
+    v = yk
+    for i in range(x.shape[0]):
+        v -= h[i] * x[i]
+    for i in range(x.shape[0]):
+        x[i] += gain[i] * v
+    return v
 
 
 @njit(cache=True, fastmath=False, nogil=True)
 def predict_block_covariance(p, phi, q, bs, bz):  # pragma: no cover - compiled
     """P <- Phi P Phi^T + Q in place, Phi and Q block diagonal (block b: states bs[b] .. bs[b] +
-    bz[b] - 1, bz 1 or 2), block pair by block pair in closed form (the upper triangle, mirrored)."""
+    bz[b] - 1), block pair by block pair in closed form (the upper triangle, mirrored) when every
+    block has one or two states; with a larger block, the whole product (symmetrized)."""
     nb = bs.shape[0]
+    dense = False
+    for a in range(nb):
+        dense = dense or bz[a] > 2
+    if dense:  # a block of more than two states: the whole covariance, O(n^3)
+        n = p.shape[0]
+        tmp = np.empty((n, n))
+        for i in range(n):
+            for j in range(n):
+                acc = 0.0
+                for m in range(n):
+                    acc += phi[i, m] * p[m, j]
+                tmp[i, j] = acc
+        for i in range(n):
+            for j in range(i, n):
+                acc = 0.0
+                for m in range(n):
+                    acc += tmp[i, m] * phi[j, m]
+                acc2 = 0.0
+                for m in range(n):
+                    acc2 += tmp[j, m] * phi[i, m]
+                v = 0.5 * ((acc + q[i, j]) + (acc2 + q[j, i]))
+                p[i, j] = v
+                p[j, i] = v
+        return
     for a in range(nb):
         oa = bs[a]
         a00 = phi[oa, oa]
@@ -95,7 +175,7 @@ def block_filter(y, phis, qs, idx, lo, hi, h, r, p0, freeze, white, lls, hm, nsc
     Writes the standardized innovations to `white` and each sample's log density to `lls` when
     they are not empty (NaN at gaps). With `freeze` = m > 0, the gain and the innovation variance
     are held once they have stopped changing over m consecutive observed samples of the same step
-    (`kalman.is_calm`: each change, extrapolated geometrically, below FREEZE_TOL of their scale,
+    (`is_calm`: each change, extrapolated geometrically, below FREEZE_TOL of their scale,
     or at rounding: the Riccati recursion's fixed point to rounding), until a gap or another step
     (module docstring).
     m spans the slowest mode's period: with lightly damped modes the recursion converges with
@@ -260,6 +340,25 @@ def propagate_blocks(phis, roots, idx, lo, hi, x0, z, h, out):  # pragma: no cov
         out[k] = acc
 
 
+def block_layout(phis: np.ndarray, qs: np.ndarray, p0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi): the finest split of the states into contiguous blocks that no transition, process
+    noise or initial covariance entry couples (state i's block is lo[i]..hi[i] - 1); a dense model is
+    one block."""
+    n = phis.shape[1]
+    coupled = (np.abs(phis).max(axis=0) + np.abs(qs).max(axis=0) + np.abs(p0)) != 0.0
+    coupled |= coupled.T
+    lo, hi = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    start = end = 0
+    for i in range(n):
+        if i > end:
+            lo[start : end + 1], hi[start : end + 1] = start, end + 1
+            start = end = i
+        reach = np.flatnonzero(coupled[i])
+        end = max(end, int(reach.max()) if reach.size else i)
+    lo[start:], hi[start:] = start, n
+    return lo, hi
+
+
 def run_blocks(
     y: np.ndarray,
     phis: np.ndarray,
@@ -281,27 +380,20 @@ def run_blocks(
     standardized innovations and each sample's log density; `hm` the gain drift on the first
     `nscaled` states, which disables the hold)."""
     empty = np.empty(0)
-    hm = empty if hm is None else np.ascontiguousarray(hm, dtype=np.float64)
-    c = lambda a: np.ascontiguousarray(a, dtype=np.float64)
-    i = lambda a: np.ascontiguousarray(a, dtype=np.int64)
-    return float(
-        block_filter(
-            c(y),
-            c(phis),
-            c(qs),
-            i(idx),
-            i(lo),
-            i(hi),
-            c(h),
-            float(r),
-            c(p0),
-            0 if hm.size else int(hold),
-            empty if white is None else white,
-            empty if lls is None else lls,
-            hm,
-            int(nscaled),
-        )
-    )
+    hm = empty if hm is None else _f64(hm)
+    white, lls = empty if white is None else white, empty if lls is None else lls
+    ys, phis, qs, h, p0 = _f64(y), _f64(phis), _f64(qs), _f64(h), _f64(p0)
+    idx, lo, hi = _i64(idx), _i64(lo), _i64(hi)
+    hold = 0 if hm.size else int(hold)
+    return float(block_filter(ys, phis, qs, idx, lo, hi, h, float(r), p0, hold, white, lls, hm, int(nscaled)))
+
+
+def _f64(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _i64(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.int64)
 
 
 def _root(cov: np.ndarray) -> np.ndarray:
@@ -331,9 +423,8 @@ def simulate_blocks(
     n, t = phis.shape[1], idx.size
     x0 = _root(np.asarray(p0, dtype=float)) @ rng.standard_normal(n)
     z = rng.standard_normal((t, n))
-    roots = np.ascontiguousarray(_root(np.asarray(qs, dtype=float)))
-    phis, idx = np.ascontiguousarray(phis, dtype=np.float64), np.ascontiguousarray(idx, dtype=np.int64)
-    lo, hi, h = np.ascontiguousarray(lo, dtype=np.int64), np.ascontiguousarray(hi, dtype=np.int64), np.asarray(h)
+    roots = _f64(_root(np.asarray(qs, dtype=float)))
+    phis, idx, lo, hi, h = _f64(phis), _i64(idx), _i64(lo), _i64(hi), _f64(h)
     out = np.empty(t)
     if hm is not None and hm.size:
         scaled = np.where(np.arange(h.size) < nscaled, h, 0.0)
@@ -342,5 +433,5 @@ def simulate_blocks(
         propagate_blocks(phis, roots, idx, lo, hi, x0, z, h - scaled, rest)
         out = hm * out + rest
     else:
-        propagate_blocks(phis, roots, idx, lo, hi, x0, z, np.ascontiguousarray(h, dtype=np.float64), out)
+        propagate_blocks(phis, roots, idx, lo, hi, x0, z, h, out)
     return out + math.sqrt(r) * rng.standard_normal(t)

@@ -23,7 +23,6 @@ from vibinverse.errors import SceneError, Unsupported
 from vibinverse.io.series import Series
 
 if TYPE_CHECKING:
-    from vibinverse.posterior import Posterior
     from vibinverse.priors import Prior
 
 
@@ -140,8 +139,9 @@ class SignalModel(ABC):
         """The period of a phase parameter as the data see it."""
         return 2 * math.pi
 
-    def casadi_objective(self, posterior: Posterior) -> Any:
-        """-log posterior as a casadi Function of (z, y, mask) with `.function` and `.data(series)`;
+    def casadi_objective(self, posterior: Any) -> Any:
+        """-log posterior (of a `vibinverse.posterior.Posterior` of this model) as a casadi Function
+        of (z, y, mask) with `.function` and `.data(series)`;
         Unsupported names the value that leaves the casadi form."""
         raise Unsupported(f"no casadi form of the {self.name} model")
 

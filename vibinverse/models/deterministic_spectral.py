@@ -10,15 +10,13 @@ the frequency prior are tried as 2f too; the posterior decides between the candi
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from vibinverse.io.series import Series
+from vibinverse.models.base import SignalModel
 from vibinverse.spectrum import harmonics, line_candidates
-
-if TYPE_CHECKING:
-    from vibinverse.models.deterministic import DeterministicModel, Line
 
 
 def free_name(line_name: str, free: set[str]) -> str | None:
@@ -30,14 +28,14 @@ def free_name(line_name: str, free: set[str]) -> str | None:
     return None
 
 
-def gain_from_level(series: Series, like: DeterministicModel) -> float:
+def gain_from_level(series: Series, like: SignalModel) -> float:
     """The sun.irradiance that makes the model's mean level the data's (the calibration gain)."""
     rest = float(np.mean(like.mean({line.amplitude: 0.0 for line in like.lines()})))
     return like.scene.sun.irradiance * float(np.nanmean(series.intensity)) / rest if rest > 0 else float("nan")
 
 
 def response_guesses(
-    series: Series, like: DeterministicModel, bounds: dict[str, tuple[float, float]], n_candidates: int = 3
+    series: Series, like: SignalModel, bounds: dict[str, tuple[float, float]], n_candidates: int = 3
 ) -> list[dict[str, float]]:
     """Candidate starting values of the free parameters in `bounds` (names as the fit's), one per
     plausible frequency of the first free line; further lines take their strongest peak."""
@@ -77,7 +75,7 @@ def response_guesses(
 
 
 def _line_guess(
-    series: Series, like: DeterministicModel, line: Line, bounds: dict, guess: dict, f: float | None, nyq: float
+    series: Series, like: SignalModel, line: Any, bounds: dict, guess: dict, f: float | None, nyq: float
 ) -> None:
     """Frequency, amplitude and phase of one line into `guess` (canonical names)."""
     free = set(bounds)
@@ -119,9 +117,7 @@ def _line_guess(
         guess[line.phase] = float(centre + (guess[line.phase] - centre + period / 2) % period - period / 2)
 
 
-def _as_free(
-    guess: dict[str, float], like: DeterministicModel, free: set[str], keep_all: bool = False
-) -> dict[str, float]:
+def _as_free(guess: dict[str, float], like: SignalModel, free: set[str], keep_all: bool = False) -> dict[str, float]:
     """`guess` under the fit's names (plain names for list first elements where the fit uses them);
     keep_all keeps values that are not free (as a probe of the model needs them)."""
     out = {}

@@ -8,20 +8,16 @@ sinusoids are least squares at the stamps.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from vibinverse.io.series import Series
+from vibinverse.models.base import SignalModel
 from vibinverse.spectrum import line_candidates, periodogram, sinusoid
-
-if TYPE_CHECKING:
-    from vibinverse.models.frame import FrameModel
 
 
 def frame_guesses(
-    series: Series, like: FrameModel, bounds: dict[str, tuple[float, float]] | None = None
+    series: Series, like: SignalModel, bounds: dict[str, tuple[float, float]] | None = None
 ) -> list[dict[str, float]]:
     """Candidate initial values, one per plausible drive line (most steady first). Further drive
     lines (`drive_frequency[i]`, i >= 1) with a prior in `bounds` start at the strongest steady
@@ -37,7 +33,7 @@ def frame_guesses(
 
 
 def _extra_lines(
-    series: Series, like: FrameModel, bounds: dict[str, tuple[float, float]], guess: dict[str, float]
+    series: Series, like: SignalModel, bounds: dict[str, tuple[float, float]], guess: dict[str, float]
 ) -> None:
     k = like.key
     n_lines = like.n_lines
@@ -64,7 +60,7 @@ def _extra_lines(
 
 def frame_guess(
     series: Series,
-    like: FrameModel,
+    like: SignalModel,
     bounds: dict[str, tuple[float, float]] | None = None,
     f_d: float | None = None,
     resonance: tuple[float, float] | None = None,

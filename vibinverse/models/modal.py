@@ -90,13 +90,9 @@ from vibinverse.models.base import (
     register_model,
 )
 from vibinverse.priors import Prior
-
-NOISE_KINDS = ("white", "ar1", "1/f")
-DRIFT_KINDS = ("none", "walk", "integrated")
-FLICKER_MIN_TERMS = 3  # the 1/f term's fewest Ornstein-Uhlenbeck states (`flicker_terms`)
-FLICKER_LOWEST_CORNER = 10.0  # cycles per record: the 1/f term's upper corner's prior starts here
-GAIN_TERMS = 6  # the gain drift's cosines: 0.5 to 3 cycles per record
-GAIN_LIMIT = 0.5  # each coefficient's prior: uniform (-limit, limit)
+from vibinverse.terms.drift import GAIN_LIMIT, GAIN_TERMS, gain_basis, gain_names
+from vibinverse.terms.noise import FLICKER_LOWEST_CORNER, flicker_terms, flicker_times
+from vibinverse.terms.nuisance import DRIFT_KINDS, NOISE_KINDS
 
 _OSC, _WALK, _IWALK, _OU = 0, 1, 2, 3
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -193,34 +189,6 @@ class ModalSpec:
         if self.white:
             out.append("noise.sigma")
         return out
-
-
-def flicker_terms(span: float, dt: float) -> int:
-    """The 1/f term's number of Ornstein-Uhlenbeck states: one for each decade from one cycle per
-    record up to the Nyquist frequency (1, 10, 100, ... cycles per record below span / 2 dt), at
-    least `FLICKER_MIN_TERMS`. A 20 s record at 200 Hz (Nyquist 2000 cycles per record): 4."""
-    nyquist_cycles = max(span, dt) / (2.0 * dt)
-    return max(FLICKER_MIN_TERMS, math.floor(math.log10(max(nyquist_cycles, 1.0)) + 1e-9) + 1)
-
-
-def flicker_times(span: float, corner: float, terms: int) -> list[float]:
-    """The 1/f term's correlation times (s), 1 / (2 pi f_k): `terms` corners f_k spread evenly in
-    log frequency from one cycle per record (1 / span) to `corner` (Hz). Scalars: it runs in every
-    likelihood call (np.geomspace took ~10 us of it)."""
-    ratio = (corner * span) ** (1.0 / max(terms - 1, 1))
-    return [span / (2.0 * math.pi * ratio**k) for k in range(terms)]
-
-
-def gain_names(terms: int) -> list[str]:
-    """The gain drift's coefficients, `gain.a1` .. `gain.a<terms>`."""
-    return [f"gain.a{j}" for j in range(1, terms + 1)]
-
-
-def gain_basis(t: np.ndarray, terms: int) -> np.ndarray:
-    """(terms, T): cos(pi j u), u = (t - t0) / span from 0 to 1, j = 1..terms: j / 2 cycles per
-    record, none with a mean over the record of more than 1 / (pi j) (the level stays the level)."""
-    u = (t - t[0]) / max(float(t[-1] - t[0]), 1e-300)
-    return np.ascontiguousarray(np.cos(np.pi * np.arange(1, terms + 1)[:, None] * u[None, :]))
 
 
 # ------------------------------------------------------------------ compiled kernels

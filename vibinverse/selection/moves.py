@@ -8,10 +8,26 @@ from abc import ABC, abstractmethod
 from dataclasses import replace
 from typing import ClassVar
 
-from vibinverse.terms.drift import GAIN_TERMS
-from vibinverse.terms.nuisance import NuisanceSpec
+from vibinverse.terms.drift import GAIN_TERMS, RandomWalk
+from vibinverse.terms.nuisance import DRIFT_TERMS, NOISE_TERMS, NuisanceSpec
 
 Proposal = tuple[str, NuisanceSpec]
+NO_NOISE = next(k for k, cls in NOISE_TERMS.items() if cls is None)  # the table's spelling of "none"
+NO_DRIFT = next(k for k, cls in DRIFT_TERMS.items() if cls is None)
+
+
+def _label(terms: dict, kind: str) -> str:
+    return terms[kind].label
+
+
+def _exchanges(spec: NuisanceSpec, field: str, terms: dict) -> list[Proposal]:
+    """The spec with `field`'s term exchanged for each other term of its registry."""
+    now = getattr(spec, field)
+    return [
+        (f"{terms[now].label} exchanged for {cls.label}", replace(spec, **{field: kind}))
+        for kind, cls in terms.items()
+        if cls is not None and kind != now
+    ]
 
 
 class Move(ABC):
@@ -52,9 +68,9 @@ class AddColouredNoise(Move):
     changes = ("noise",)
 
     def propose(self, spec: NuisanceSpec) -> list[Proposal]:
-        if spec.noise != "white":
+        if spec.coloured:
             return []
-        return [("AR(1) noise added", replace(spec, noise="ar1")), ("1/f noise added", replace(spec, noise="1/f"))]
+        return [(f"{cls.label} added", replace(spec, noise=kind)) for kind, cls in NOISE_TERMS.items() if cls]
 
 
 @register_move
@@ -67,7 +83,7 @@ class AddDrift(Move):
     changes = ("drift",)
 
     def propose(self, spec: NuisanceSpec) -> list[Proposal]:
-        return [] if spec.drift != "none" else [("random-walk drift added", replace(spec, drift="walk"))]
+        return [] if spec.drifting else [(f"{RandomWalk.label} added", replace(spec, drift=RandomWalk.kind))]
 
 
 @register_move
@@ -92,8 +108,7 @@ class ExchangeNoise(Move):
     changes = ("noise",)
 
     def propose(self, spec: NuisanceSpec) -> list[Proposal]:
-        other = {"ar1": "1/f", "1/f": "ar1"}.get(spec.noise)
-        return [] if other is None else [(f"{spec.noise} noise exchanged for {other}", replace(spec, noise=other))]
+        return _exchanges(spec, "noise", NOISE_TERMS) if spec.coloured else []
 
 
 @register_move
@@ -105,8 +120,7 @@ class ExchangeDrift(Move):
     changes = ("drift",)
 
     def propose(self, spec: NuisanceSpec) -> list[Proposal]:
-        other = {"walk": "integrated", "integrated": "walk"}.get(spec.drift)
-        return [] if other is None else [(f"{spec.drift} drift exchanged for {other}", replace(spec, drift=other))]
+        return _exchanges(spec, "drift", DRIFT_TERMS) if spec.drifting else []
 
 
 @register_move
@@ -119,7 +133,7 @@ class DropWhite(Move):
     changes = ("white",)
 
     def propose(self, spec: NuisanceSpec) -> list[Proposal]:
-        if spec.noise == "white" or not spec.white:
+        if not spec.coloured or not spec.white:
             return []
         return [("white noise removed", replace(spec, white=False))]
 
@@ -145,10 +159,10 @@ class DropTerm(Move):
 
     def proposals(self, spec: NuisanceSpec, fixed: frozenset[str]) -> list[Proposal]:
         out = []
-        if spec.noise != "white" and "noise" not in fixed and (spec.white or "white" not in fixed):
-            out.append((f"{spec.noise} noise removed", replace(spec, noise="white", white=True)))
-        if spec.drift != "none" and "drift" not in fixed:
-            out.append((f"{spec.drift} drift removed", replace(spec, drift="none")))
+        if spec.coloured and "noise" not in fixed and (spec.white or "white" not in fixed):
+            out.append((f"{_label(NOISE_TERMS, spec.noise)} removed", replace(spec, noise=NO_NOISE, white=True)))
+        if spec.drifting and "drift" not in fixed:
+            out.append((f"{_label(DRIFT_TERMS, spec.drift)} removed", replace(spec, drift=NO_DRIFT)))
         if spec.gain and "gain" not in fixed:
             out.append(("gain drift removed", replace(spec, gain=0)))
         return out

@@ -38,11 +38,10 @@ from vibinverse.optimize import maximize
 from vibinverse.posterior import Posterior
 from vibinverse.priors import Prior
 from vibinverse.selection.moves import MOVES
-from vibinverse.terms.nuisance import NuisanceSpec
+from vibinverse.terms.nuisance import SPEC_KEYS, NuisanceSpec
 
 logger = logging.getLogger(__name__)
 
-SPEC_KEYS = ("noise", "drift", "gain", "white")
 MAX_STEPS = 6
 SCREEN_MARGIN = 0.5  # x ln n: a partial fit this close to lowering the BIC is refitted in full
 

@@ -150,6 +150,10 @@ class Term(ABC):
         """Its fitted values, JSON-able (the report's and the summary's components)."""
         return {"kind": self.kind, **{n: float(values[n]) for n in self.names()}}
 
+    def slowest_period(self, values: Mapping[str, float]) -> float | None:
+        """The period (s) of its slowest oscillation (None: it does not oscillate)."""
+        return None
+
     def valid(self, values: Mapping[str, float]) -> bool:
         """Whether `values` lie where the term is defined (positive scales and times)."""
         return all(math.isfinite(values[n]) and values[n] >= 0.0 for n in self.names())
@@ -279,8 +283,23 @@ class TermSum:
         y = series.intensity
         if mean is not None:  # the deterministic signal, dimmed with the light
             y = y - (mean * ss.hm if ss.hm.size else mean)
-        ll = run_blocks(y, ss.phis, ss.qs, idx, ss.lo, ss.hi, ss.h, ss.r, ss.p0, hm=ss.hm, nscaled=ss.nscaled)
+        hold = 0 if ss.hm.size else self.hold(values, float(np.min(steps)), series.time.size)
+        ll = run_blocks(
+            y, ss.phis, ss.qs, idx, ss.lo, ss.hi, ss.h, ss.r, ss.p0, hold=hold, hm=ss.hm, nscaled=ss.nscaled
+        )
         return ll if math.isfinite(ll) else -math.inf
+
+    def hold(self, values: Mapping[str, float], step: float, samples: int) -> int:
+        """Samples over which the engine's gain must stay converged before it is held
+        (`block_filter`'s `freeze`): one period of the slowest oscillation any term has
+        (`Term.slowest_period`) at the shortest step, plus one; 1 when none oscillates (walks and
+        Ornstein-Uhlenbeck states converge without oscillating)."""
+        periods = [p for t in self.terms if (p := t.slowest_period(values)) is not None]
+        if not periods:
+            return 1
+        if not max(periods) < math.inf or not step > 0:
+            return samples
+        return int(min(samples, math.ceil(max(periods) / step) + 1))
 
     def whittle_fisher(self, values: Mapping[str, float], names: list[str], facts: DataFacts, n: int) -> np.ndarray:
         """Whittle's Fisher information of `names` from the summed PSD on the n-sample record's

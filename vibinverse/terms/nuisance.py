@@ -5,19 +5,27 @@ its own state (`FrameModel`: the tilt modes + these terms, one Kalman engine).""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from vibinverse.engines.kalman import run_blocks, simulate_blocks
 from vibinverse.errors import SceneError
-from vibinverse.terms.base import TERMS, TermSum
-from vibinverse.terms.drift import GAIN_TERMS, GainDrift
-from vibinverse.terms.noise import White
+from vibinverse.priors import Prior
+from vibinverse.terms.base import DataFacts, StateSpace, Term, TermSum
+from vibinverse.terms.drift import GAIN_TERMS, GainDrift, IntegratedWalk, RandomWalk
+from vibinverse.terms.noise import AR1, Flicker, White
 
-NOISE_KINDS = ("white", "ar1", "1/f")  # white: no coloured term; the others are `TERMS` keys
-DRIFT_KINDS = ("none", "walk", "integrated")  # none: no drift; the others are `TERMS` keys
-KEYS = ("noise", "drift", "gain", "white", "values", "start")
+#: the coloured noise by its table spelling ("white": none) and the drift ("none": none)
+NOISE_TERMS: dict[str, type[Term] | None] = {"white": None, "ar1": AR1, "1/f": Flicker}
+DRIFT_TERMS: dict[str, type[Term] | None] = {"none": None, "walk": RandomWalk, "integrated": IntegratedWalk}
+NOISE_KINDS = tuple(NOISE_TERMS)
+DRIFT_KINDS = tuple(DRIFT_TERMS)
+GAIN_WORDS = {"drift": GAIN_TERMS, "none": 0}  # --gain drift / none
+SPEC_KEYS = ("noise", "drift", "gain", "white")  # what a spec holds (the search's open or fixed keys)
+KEYS = (*SPEC_KEYS, "values", "start")
 
 
 @dataclass(frozen=True)
@@ -32,7 +40,7 @@ class NuisanceSpec:
     white: bool = True
 
     def __post_init__(self) -> None:
-        if not self.white and self.noise == "white":
+        if not self.white and not self.coloured:
             raise SceneError("nuisance.white: false needs a coloured noise (noise = 'ar1' or '1/f') in its place")
 
     @classmethod
@@ -52,10 +60,10 @@ class NuisanceSpec:
         if drift not in DRIFT_KINDS:
             raise SceneError(f"{key}.drift: {m.get('drift')!r}; allowed: false, true, 'none', 'walk', 'integrated'")
         gain = m.get("gain", 0)
-        if gain is True or gain == "drift":
-            gain = GAIN_TERMS
-        elif gain is False or gain is None or gain == "none":
-            gain = 0
+        if isinstance(gain, str):
+            gain = GAIN_WORDS.get(gain, gain)
+        elif gain is True or gain is False or gain is None:
+            gain = GAIN_TERMS if gain else 0
         if isinstance(gain, bool) or not isinstance(gain, (int, np.integer)) or not 0 <= int(gain) <= 24:
             raise SceneError(f"{key}.gain: {m.get('gain')!r}; allowed: false, true ({GAIN_TERMS} cosines) or 0..24")
         white = m.get("white", True)
@@ -63,17 +71,23 @@ class NuisanceSpec:
             raise SceneError(f"{key}.white: {white!r}; allowed: true, or false beside noise = 'ar1' or '1/f'")
         return cls(noise, drift, int(gain), bool(white))
 
+    @property
+    def coloured(self) -> bool:
+        """Whether a coloured noise (AR(1), 1/f) is there."""
+        return NOISE_TERMS[self.noise] is not None
+
+    @property
+    def drifting(self) -> bool:
+        """Whether an additive drift is there."""
+        return DRIFT_TERMS[self.drift] is not None
+
     def table(self) -> dict[str, Any]:
         """The `nuisance` sub-table of this spec."""
         return {"noise": self.noise, "drift": self.drift, "gain": self.gain, "white": self.white}
 
     def terms(self, white: bool | None = None) -> TermSum:
         """The terms (the white noise only when `white`, default: the spec's)."""
-        out = []
-        if self.noise != "white":
-            out.append(TERMS[self.noise]())
-        if self.drift != "none":
-            out.append(TERMS[self.drift]())
+        out = [cls() for cls in (NOISE_TERMS[self.noise], DRIFT_TERMS[self.drift]) if cls is not None]
         if self.gain:
             out.append(GainDrift(self.gain))
         if self.white if white is None else white:
@@ -83,3 +97,97 @@ class NuisanceSpec:
     def describe(self) -> str:
         """In words, e.g. "AR(1) noise, random-walk drift, white noise" (each term's `label`)."""
         return ", ".join(t.label for t in self.terms()) or "none"
+
+
+class NuisanceState:
+    """The nuisance terms a scene model holds beside its own states (`SignalModel.accepts_nuisance`):
+    their spec, parameters, priors and values (given, else the table's `nuisance.values` (fixed) or
+    `nuisance.start` (the nuisance search's optimum), else their spectral starts), and the composed
+    state space the engine runs (`compose`, `run`)."""
+
+    def __init__(self, table: dict[str, Any], facts: DataFacts):
+        self.spec = NuisanceSpec.from_table(table)
+        self.terms = self.spec.terms(white=False)
+        self.facts = facts
+        given = table.get("nuisance") or {}
+        self._given = {k: float(x) for key in ("start", "values") for k, x in (given.get(key) or {}).items()}
+        self._base: dict[str, float] | None = None
+
+    def __bool__(self) -> bool:
+        """Whether any nuisance state or multiplier sits beside the model's own."""
+        return bool(self.terms)
+
+    @property
+    def white(self) -> bool:
+        """Whether the white sensor noise is there."""
+        return self.spec.white
+
+    def names(self) -> list[str]:
+        return self.terms.names()
+
+    def priors(self) -> dict[str, Prior]:
+        return self.terms.priors(self.facts)
+
+    def value(self, values: Mapping[str, float], name: str) -> float:
+        """A nuisance parameter's value (class docstring)."""
+        if name in values:
+            return values[name]
+        if self._base is None:
+            self._base = {**self.terms.starts(self.facts), **self._given}
+        return self._base[name]
+
+    def compose(
+        self,
+        values: Mapping[str, float],
+        steps: np.ndarray,
+        lead: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        blocks: list[int],
+        r: float,
+        samples: int,
+    ) -> tuple[StateSpace, bool]:
+        """(the state space, whether the values are inside the terms' domain): the model's own
+        states first (`lead` = (phis, qs, p0, h) in `blocks` of 1 or 2 states, which a gain drift
+        multiplies), the terms' after them, measurement variance `r`, the multiplier cut to
+        `samples` (a stretch of the record keeps the whole record's cosines). Outside the domain the
+        tables are formed at the starts."""
+        v = {n: self.value(values, n) for n in self.names()}
+        valid = self.terms.valid(v)
+        if not valid:
+            v = {n: self.value({}, n) for n in self.names()}
+        phis, qs, p0, h = lead
+        n = h.size
+        ss = self.terms.state_space(v, steps, self.facts, lead=n)
+        ss.phis[:, :n, :n], ss.qs[:, :n, :n], ss.p0[:n, :n], ss.h[:n] = phis, qs, p0, h
+        o = 0
+        for size in blocks:
+            ss.lo[o : o + size], ss.hi[o : o + size] = o, o + size
+            o += size
+        ss.r = r
+        ss.hm = ss.hm[:samples]
+        if ss.hm.size:
+            valid = valid and bool(ss.hm.min() > 0.0)  # 1 + g must stay positive
+        return ss, valid
+
+    def run(
+        self,
+        residual: np.ndarray,
+        ss: StateSpace,
+        idx: np.ndarray,
+        white: np.ndarray | None = None,
+        lls: np.ndarray | None = None,
+    ) -> float:
+        """log p(residual) of the composed state space by the engine, the converged gain held
+        (`kalman.hold_samples`) unless a gain drift varies the observation."""
+        from vibinverse.kalman import hold_samples
+
+        hold = 0 if ss.hm.size else hold_samples(ss.phis)
+        return run_blocks(
+            residual, ss.phis, ss.qs, idx, ss.lo, ss.hi, ss.h, ss.r, ss.p0,
+            hold=hold, white=white, lls=lls, hm=ss.hm, nscaled=ss.nscaled,
+        )  # fmt: skip
+
+    def simulate(self, ss: StateSpace, idx: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A draw of the composed state space at every sample of `idx` (no mean)."""
+        return simulate_blocks(
+            ss.phis, ss.qs, idx, ss.lo, ss.hi, ss.h, ss.r, ss.p0, rng, hm=ss.hm, nscaled=ss.nscaled
+        )  # fmt: skip

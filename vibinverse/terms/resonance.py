@@ -61,6 +61,10 @@ class Oscillator(Term):
         big_w = 2.0 * math.pi * np.asarray(f, dtype=float)
         return 2.0 * kappa / ((w * w - big_w * big_w) ** 2 + (2.0 * a * big_w) ** 2)
 
+    def slowest_period(self, values: Mapping[str, float]) -> float | None:
+        f = float(values[self.names()[0]])
+        return 1.0 / f if f > 0 else math.inf
+
     def valid(self, values: Mapping[str, float]) -> bool:
         f, zeta, rms = (float(values[n]) for n in self.names())
         return all(math.isfinite(v) for v in (f, zeta, rms)) and f > 0.0 and zeta > 0.0 and rms >= 0.0

@@ -12,26 +12,13 @@ from scipy.linalg import toeplitz
 from scipy.stats import multivariate_normal
 
 import vibinverse as vi
-from forward.scene_file import scene_from_table
-from forward.sensor import observe
-from tests.conftest import K, frame
+from tests.conftest import K, frame, frame_series
 from vibinverse.errors import InputError, SceneError
-from vibinverse.io.series import Series
 from vibinverse.models import build_model
 
 
-def _series(table, seed=0, ar=None, n=None):
-    obs = observe(scene_from_table(table), seed)
-    y = obs.intensity.copy()
-    if ar is not None:  # AR(1) sensor noise (phi, sd)
-        phi, sd = ar
-        rng = np.random.default_rng(1000 + seed)
-        e = np.empty(y.size)
-        e[0] = rng.normal() * sd
-        for k in range(1, y.size):
-            e[k] = phi * e[k - 1] + math.sqrt(1 - phi**2) * sd * rng.normal()
-        y = y + e
-    return Series(obs.time, y, f"seed {seed}", scene=table)
+def _series(table, seed=0, ar=None):
+    return frame_series(table, seed, ar)
 
 
 def _tilt_autocov(c, n):

@@ -18,7 +18,6 @@ from vibinverse.errors import SceneError
 from vibinverse.kalman import log_likelihood_steps_reference
 from vibinverse.models import MODELS, model_class_for
 from vibinverse.models.modal import (
-    FLICKER_MIN_TERMS,
     ModalModel,
     ModalSpec,
     _fill_tables,
@@ -26,6 +25,7 @@ from vibinverse.models.modal import (
     flicker_terms,
 )
 from vibinverse.posterior import Posterior
+from vibinverse.terms.noise import FLICKER_MIN_TERMS
 
 
 def van_loan(a: np.ndarray, gq: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

@@ -4,16 +4,12 @@ is skipped when every key is fixed."""
 
 import math
 
-import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 import vibinverse as vi
-from forward.scene_file import scene_from_table
-from forward.sensor import observe
-from tests.conftest import K, frame
-from vibinverse.io.series import Series
+from tests.conftest import K, frame, frame_series
 from vibinverse.models.frame import FrameModel
 from vibinverse.models.modal import ModalModel
 from vibinverse.selection.moves import MOVES
@@ -50,18 +46,7 @@ def test_the_search_runs_only_where_a_key_is_open():
 
 
 def _data(seed, ar=None):
-    table = frame("noise.sigma=0" if ar else "noise.sigma=0.6")
-    obs = observe(scene_from_table(table), seed)
-    y = obs.intensity.copy()
-    if ar:
-        phi, sd = ar
-        rng = np.random.default_rng(1000 + seed)
-        e = np.empty(y.size)
-        e[0] = rng.normal() * sd
-        for k in range(1, y.size):
-            e[k] = phi * e[k - 1] + math.sqrt(1 - phi**2) * sd * rng.normal()
-        y += e
-    return Series(obs.time, y, f"seed {seed}", scene=table)
+    return frame_series(frame("noise.sigma=0" if ar else "noise.sigma=0.6"), seed, ar)
 
 
 @pytest.mark.slow
