@@ -110,6 +110,11 @@ class SignalModel(ABC):
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
         """Fisher information of `names` at `values`."""
 
+    def with_nuisance(self, nuisance: dict[str, Any]) -> SignalModel:
+        """The same model with the `nuisance` table given (`vibinverse.terms.nuisance`), its scene's
+        work not done again where the model can help it (the nuisance search fits many)."""
+        return type(self)({**self.base, "nuisance": nuisance}, self.series)
+
     def nuisance_priors(self) -> dict[str, Prior]:
         """Default priors of the nuisance terms' parameters (free beside any the analyst names)."""
         return {}

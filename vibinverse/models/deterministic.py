@@ -41,17 +41,21 @@ from vibinverse.errors import SceneError, Unsupported
 from vibinverse.fisher import response_fisher
 from vibinverse.io.scenes import scene_of
 from vibinverse.io.series import MIN_CYCLES, Series, with_sampling
-from vibinverse.models.base import LineTest, SignalModel, register_model
+from vibinverse.kalman import unique_steps
+from vibinverse.models.base import LineTest, SignalModel, intensity_units, observed_information, register_model
 from vibinverse.models.deterministic_spectral import free_name, gain_from_level, response_guesses
 from vibinverse.priors import ParameterSpace, Prior
 from vibinverse.scene_keys import get_value, numeric_keys, set_value
 from vibinverse.spectrum import harmonics
+from vibinverse.terms.base import DataFacts
+from vibinverse.terms.nuisance import NuisanceState
 
 if TYPE_CHECKING:
     from vibinverse.posterior import Posterior
 
 # values a fit cannot meaningfully free: they shape the computation, not the world
-_NOT_FITTABLE = ("sampling.", "infer.", "title", "footprint.resolution", "noise.")
+_NOT_FITTABLE = ("sampling.", "infer.", "title", "footprint.resolution", "noise.", "nuisance.")
+_NOISE_KINDS = ("noise", "nuisance")  # parameters the mean does not read (`_classify`)
 AMPLITUDE_KEYS = ("center_deflection", "amplitude", "pressure", "boundary_amplitude")
 TAYLOR_TOLERANCE = 0.1  # the Taylor model is used when its error bound is below this x the noise sd
 
@@ -90,6 +94,7 @@ class DeterministicModel(SignalModel):
 
     name = "deterministic"
     casadi_bytes_per_sample = 40e3  # 200 MB at 5000 samples (one line)
+    accepts_nuisance = True
     scene_defaults: ClassVar[dict[str, float]] = {"sun.irradiance": 1.0}  # forward.scene.Sun
 
     @classmethod
@@ -116,12 +121,26 @@ class DeterministicModel(SignalModel):
         self.t = series.time
         self.base = with_sampling(table, series)
         self.scene = scene_of(self.base)
+        # nuisance terms beside the deterministic mean (`vibinverse.terms`): then the likelihood is
+        # the engine's (coloured noise, drift and gain drift are states or a multiplier), the white
+        # noise its measurement noise
+        self.nuisance = NuisanceState(self.base, DataFacts.of(series))
+        if self.composed and (self.scene.noise.photons_per_unit > 0 or self.scene.noise.adc_bits > 0):
+            raise SceneError(
+                "nuisance: terms beside a scene whose sensor noise varies per sample (noise.photons_per_unit, "
+                "noise.adc_bits) are not supported; set those to 0 (their variance is then in noise.sigma)"
+            )
+        if series.uniform:
+            self._steps, self._idx = np.array([series.dt]), np.zeros(series.time.size, dtype=np.int64)
+        else:
+            self._steps, self._idx = unique_steps(series.time, rtol=1e-9)
         self._good = np.isfinite(series.intensity)
         self.ref_level = float(np.mean(series.intensity[self._good]))
         self._y_ref = series.intensity[self._good] - self.ref_level
         if not any(isinstance(s.motion, ModalMotion) for s in self.scene.surfaces):
             raise SceneError("fit: the scene has no vibrating surface (a plate, rayleigh or frame motion)")
         self.shape_cache = _Bounded()
+        self._last_parts: tuple[tuple, tuple[float, np.ndarray]] | None = None
         for s in self.scene.surfaces:  # an absent phase is 0: write it, so that it can be set
             m = self.base["surfaces"][s.name].get("motion") or {}
             if isinstance(s.motion, ModalMotion) and "frequency" in m and "phase" not in m:
@@ -131,6 +150,20 @@ class DeterministicModel(SignalModel):
         self._fixed: dict[str, float] = {}
         self._second_order: dict[Line, bool] = {}
         self.reduction, self.reduction_error = self._choose_model()
+
+    def with_nuisance(self, nuisance: dict[str, Any]) -> DeterministicModel:
+        """This model with other nuisance terms: the scene, its reduced model and caches are shared."""
+        out = copy.copy(self)
+        out.base = {**self.base, "nuisance": nuisance}
+        out.nuisance = NuisanceState(out.base, self.nuisance.facts)
+        out._last_parts = None
+        out.kinds = {n: out._classify(n) for n in out.fittable()}
+        return out
+
+    @property
+    def composed(self) -> bool:
+        """Whether nuisance terms (or no white noise) make the engine the likelihood."""
+        return bool(self.nuisance) or not self.nuisance.white
 
     # ------------------------------------------------------------------ names
     def fittable(self) -> set[str]:
@@ -143,9 +176,12 @@ class DeterministicModel(SignalModel):
         for line in self.lines():
             for n in line.names():
                 names |= {n, n[:-3]} if n.endswith("[0]") else {n}
-        return names
+        names |= set(self.nuisance.names())
+        return names if self.nuisance.white else names - {"noise.sigma"}
 
     def _classify(self, name: str) -> str:
+        if name in self.nuisance.names():
+            return "nuisance"
         if name == "noise.sigma":
             return "noise"
         if name == "sun.irradiance":
@@ -247,7 +283,20 @@ class DeterministicModel(SignalModel):
 
     def parts(self, values: dict[str, float]) -> tuple[float, np.ndarray]:
         """(x at rest, x(t) - x at rest) at the given values: the AC part formed directly (Taylor),
-        so that a signal ~1e-12 of the mean level keeps its digits in the likelihood."""
+        so that a signal ~1e-12 of the mean level keeps its digits in the likelihood. The last
+        mean is kept by the values it depends on: a fit of the noise or nuisance terms alone (the
+        nuisance search's partial fits) forms it once."""
+        key = (
+            self.reduction,
+            tuple(sorted((n, v) for n, v in values.items() if self.kinds.get(n) not in _NOISE_KINDS)),
+        )
+        if self._last_parts is not None and self._last_parts[0] == key:
+            return self._last_parts[1]
+        out = self._parts(values)
+        self._last_parts = (key, out)
+        return out
+
+    def _parts(self, values: dict[str, float]) -> tuple[float, np.ndarray]:
         scene_keys = {n: v for n, v in values.items() if self.kinds.get(n) == "scene"}
         if scene_keys:
             scene = scene_from_table(self.table_with(values))
@@ -332,7 +381,32 @@ class DeterministicModel(SignalModel):
             return None
         return r, var, level + ac
 
+    def _engine(self, values: dict[str, float], white: np.ndarray | None = None, lls: np.ndarray | None = None):
+        """(log-likelihood, the composed state space, the mean) by the engine, the deterministic mean
+        (times a gain drift) subtracted as the white-noise likelihood does (about the data's mean
+        level, `_misfit`); (-inf, None, None) outside what the scene or the terms allow."""
+        try:
+            level, ac = self.parts(values)
+        except ForwardSceneError:
+            return -math.inf, None, None
+        r = float(self.variance(None, values)) if self.nuisance.white else 0.0
+        none = np.zeros((self._steps.size, 0, 0))
+        ss, valid = self.nuisance.compose(
+            values, self._steps, (none, none, np.zeros((0, 0)), np.zeros(0)), [], r, self.t.size
+        )
+        if not valid or (self.nuisance.white and not r > 0):
+            return -math.inf, None, None
+        m = ss.hm if ss.hm.size else 1.0
+        residual = np.full(self.t.size, np.nan)
+        residual[self._good] = self._y_ref - (
+            np.asarray((m - 1.0) * level + m * ac)[self._good] + (level - self.ref_level)
+        )
+        ll = self.nuisance.run(residual, ss, self._idx, white=white, lls=lls)
+        return ll, ss, m * (level + ac)
+
     def log_likelihood(self, values: dict[str, float]) -> float:
+        if self.composed:
+            return _finite(self._engine(values)[0])
         misfit = self._misfit(values)
         if misfit is None:
             return -math.inf
@@ -343,8 +417,12 @@ class DeterministicModel(SignalModel):
         return float(-0.5 * (np.dot(r, r) / var + n * math.log(2 * math.pi * var)))
 
     def pointwise_log_likelihood(self, values: dict[str, float]) -> np.ndarray:
-        """Independent Gaussian densities, one per sample (the noise is white); NaN at gaps."""
+        """Independent Gaussian densities, one per sample (the noise is white); NaN at gaps. With
+        nuisance terms, the engine's one-step predictive densities."""
         out = np.full(self.series.time.size, np.nan)
+        if self.composed:
+            self._engine(values, lls=out)
+            return out
         misfit = self._misfit(values)
         if misfit is not None:
             r, var, _ = misfit
@@ -352,8 +430,12 @@ class DeterministicModel(SignalModel):
         return out
 
     def residuals(self, values: dict[str, float]) -> np.ndarray:
-        """r / sd of every sample (white noise: the residuals are the innovations); NaN at gaps."""
+        """r / sd of every sample (white noise: the residuals are the innovations); NaN at gaps.
+        With nuisance terms, the engine's standardized innovations."""
         out = np.full(self.series.time.size, np.nan)
+        if self.composed:
+            self._engine(values, white=out)
+            return out
         misfit = self._misfit(values)
         if misfit is not None:
             r, var, _ = misfit
@@ -361,7 +443,15 @@ class DeterministicModel(SignalModel):
         return out
 
     def replicate(self, values: dict[str, float], rng: np.random.Generator) -> np.ndarray:
-        """The mean plus white noise of the model's variance, NaN at the data's gaps."""
+        """The mean plus white noise of the model's variance (with nuisance terms, plus a draw of
+        them), NaN at the data's gaps."""
+        if self.composed:
+            _, ss, mean = self._engine(values)
+            if ss is None:
+                raise Unsupported("replicate: the values lie outside what the scene allows")
+            out = mean + self.nuisance.simulate(ss, self._idx, rng)
+            out[~self._good] = np.nan
+            return out
         misfit = self._misfit(values)
         if misfit is None:
             raise Unsupported("replicate: the values lie outside what the scene allows")
@@ -374,7 +464,7 @@ class DeterministicModel(SignalModel):
     # ------------------------------------------------------------------ what the estimators need
     def check_free(self, names: list[str]) -> None:
         super().check_free(names)
-        if "noise.sigma" not in names and not self.variance(np.ones(1), {}) > 0:
+        if self.nuisance.white and "noise.sigma" not in names and not self.variance(np.ones(1), {}) > 0:
             raise SceneError(
                 "noise.sigma: the scene's sensor noise is 0, so no data fit it; set noise.sigma > 0 "
                 "or free it (--free 'noise.sigma=loguniform(a, b)')"
@@ -420,6 +510,9 @@ class DeterministicModel(SignalModel):
         spread = float(np.nanstd(series.intensity))  # > 0: a constant series is refused on reading
         # from far below the spread (1e-9 of the level, or 1 % of the spread for data with a huge offset)
         free["noise.sigma"] = Prior("loguniform", (max(min(1e-9 * scale, 0.01 * spread), 1e-300), 10.0 * spread))
+        if not self.nuisance.white:
+            del free["noise.sigma"]
+        free.update(self.nuisance.priors())
         space = ParameterSpace(free)
         guesses = [
             {n: free[n].inside(g.get(n, free[n].centre())) for n in free}
@@ -438,8 +531,23 @@ class DeterministicModel(SignalModel):
 
     def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
         """Periodogram peaks in each frequency prior and in twice it (taken as 2f), amplitudes and
-        phases calibrated through the forward model (`deterministic_spectral.response_guesses`)."""
-        return response_guesses(self.series, self, bounds)
+        phases calibrated through the forward model (`deterministic_spectral.response_guesses`);
+        the nuisance terms' from their spectral starts."""
+        out = response_guesses(self.series, self, bounds)
+        for g in out:
+            g.update({n: self.nuisance.value({}, n) for n in self.nuisance.names()})
+            if not self.nuisance.white:
+                g.pop("noise.sigma", None)
+        return out
+
+    def nuisance_priors(self) -> dict[str, Prior]:
+        """The nuisance terms' default priors (`Term.priors`)."""
+        return self.nuisance.priors()
+
+    def units(self, name: str) -> tuple[str, str]:
+        """A nuisance term's own units (`Term.units`), else by the name (`SignalModel.units`)."""
+        found = self.nuisance.terms.units(name, intensity_units(self.series))
+        return found if found is not None else super().units(name)
 
     def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
         """Each line with its amplitude set to 0: `vibration` (one line) or `vibration_i` (several).
@@ -469,11 +577,30 @@ class DeterministicModel(SignalModel):
         return out
 
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
-        """D^T diag(1/var) D of the mean, plus the variance term of noise.sigma (`vibinverse.fisher`)."""
-        return response_fisher(self, values, names)
+        """D^T diag(1/var) D of the mean, plus the variance term of noise.sigma (`vibinverse.fisher`);
+        with nuisance terms the observed information (finite differences of the exact likelihood)."""
+        if not self.composed:
+            return response_fisher(self, values, names)
+        v0 = {
+            n: values[n]
+            if n in values
+            else self.nuisance.value({}, n)
+            if n in self.nuisance.names()
+            else self.base_value(n)
+            for n in names
+        }
+        return observed_information(
+            lambda d: self.log_likelihood({**values, **d}),
+            v0,
+            names,
+            lambda n: max(abs(v0[n]), 1e-12) if not n.endswith("phase") else 1.0,
+            lambda n: not n.endswith("phase") and not n.startswith("gain."),
+        )
 
     def casadi_objective(self, posterior: Posterior) -> Any:
         """`deterministic_casadi.CasadiResponseObjective` (Unsupported names the value that breaks its form)."""
+        if self.composed:
+            raise Unsupported(f"the casadi MAP has no nuisance terms ({self.nuisance.spec.describe()}) yet")
         from vibinverse.models.deterministic_casadi import CasadiResponseObjective
 
         return CasadiResponseObjective(posterior)
@@ -484,7 +611,10 @@ class DeterministicModel(SignalModel):
         their own frequency f, while the data's spectrum shows them at 2f; `vibinverse.verdict`
         says so)."""
         second = [line.frequency for line in self.lines() if self.second_order_only(line)]
-        return {"kind": self.reduction, "error_bound": self.reduction_error, "second_order": second}
+        out = {"kind": self.reduction, "error_bound": self.reduction_error, "second_order": second}
+        if self.composed:
+            out.update(nuisance=self.nuisance.spec.table(), terms=self.nuisance.spec.describe())
+        return out
 
     def refine(self, values: dict[str, float]) -> tuple[dict[str, Any], str | None]:
         """Switch to the compiled (Chebyshev) model when the Taylor mean's error bound at the fit

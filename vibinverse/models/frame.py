@@ -33,7 +33,6 @@ import numpy as np
 from forward.errors import SceneError as ForwardSceneError
 from forward.motion.frame import FrameParameters, linearize
 from forward.reduce import rigid_observation
-from vibinverse.engines.kalman import run_blocks, simulate_blocks
 from vibinverse.engines.state_space import Components
 from vibinverse.errors import DataError, NumericalError, SceneError, Unsupported
 from vibinverse.fisher import frame_fisher
@@ -42,7 +41,6 @@ from vibinverse.io.series import MIN_CYCLES, Series, with_sampling
 from vibinverse.kalman import (
     held_oscillator_fill,
     held_stationary,
-    hold_samples,
     log_likelihood,
     log_likelihood_steps,
     njit,
@@ -57,7 +55,7 @@ from vibinverse.models.frame_spectral import frame_guess, frame_guesses
 from vibinverse.priors import Prior
 from vibinverse.scene_keys import get_value, numeric_keys, set_value
 from vibinverse.terms.base import DataFacts
-from vibinverse.terms.nuisance import NuisanceSpec
+from vibinverse.terms.nuisance import NuisanceState
 
 if TYPE_CHECKING:
     from vibinverse.posterior import Posterior
@@ -180,10 +178,14 @@ class FrameModel(SignalModel):
         self._observed: tuple[tuple, tuple] | None = None  # the last re-formed observation, by its values
         # nuisance terms beside the tilt modes (`vibinverse.terms`): the sensor noise stays the
         # scene's noise.sigma (absent when the spec has no white noise)
-        self.nuisance = NuisanceSpec.from_table(self.base)
-        self.extra = self.nuisance.terms(white=False)
-        self._facts = DataFacts.of(series) if facts is None else facts
-        self._nuisance_base: dict[str, float] | None = None
+        self.nuisance = NuisanceState(self.base, DataFacts.of(series) if facts is None else facts)
+
+    def with_nuisance(self, nuisance: dict[str, Any]) -> FrameModel:
+        """This model with other nuisance terms: the scene's observation and the tilt rows are shared."""
+        out = copy.copy(self)
+        out.base = {**self.base, "nuisance": nuisance}
+        out.nuisance = NuisanceState(out.base, self.nuisance.facts)
+        return out
 
     @property
     def steps(self) -> np.ndarray:
@@ -241,7 +243,7 @@ class FrameModel(SignalModel):
         sigma = values.get("noise.sigma", self.base_value("noise.sigma") if "noise" in self.base else 0.0)
         if not self.nuisance.white:
             sigma = 0.0
-        if self.extra:
+        if self.nuisance:
             return self._composed(values, mean, phis, qs, p0, h, float(sigma) ** 2)
         phi, q = phis[-1], qs[-1]
         if self.per_step:
@@ -258,58 +260,20 @@ class FrameModel(SignalModel):
         h: np.ndarray,
         r: float,
     ) -> Components:
-        """The tilt modes' blocks first, the nuisance terms' after them (`TermSum.state_space`), a
+        """The tilt modes' blocks first, the nuisance terms' after them (`NuisanceState.compose`), a
         gain drift multiplying the mean and the tilt's observation."""
-        n = h.size
-        v = {name: self.nuisance_value(values, name) for name in self.extra.names()}
-        valid = self.extra.valid(v)
-        if not valid:  # tables at the starts; the likelihood reads `valid`
-            v = {name: self.nuisance_value({}, name) for name in self.extra.names()}
-        ss = self.extra.state_space(v, self._steps, self._facts, lead=n)
-        ss.phis[:, :n, :n], ss.qs[:, :n, :n], ss.p0[:n, :n], ss.h[:n] = phis, qs, p0, h
-        for b in range(0, n, 2):
-            ss.lo[b : b + 2], ss.hi[b : b + 2] = b, b + 2
-        hm = ss.hm[: self.t.size]
-        if hm.size:
-            valid = valid and bool(hm.min() > 0.0)  # 1 + g must stay positive
-            mean = mean * hm
+        blocks = [2] * (h.size // 2)
+        ss, valid = self.nuisance.compose(values, self._steps, (phis, qs, p0, h), blocks, r, self.t.size)
+        if ss.hm.size:
+            mean = mean * ss.hm
         idx = self._idx if self.per_step else np.zeros(self.t.size, dtype=np.int64)
-        phi, q = ss.phis[-1], ss.qs[-1]
-        return Components(mean, phi, q, ss.h, r, ss.p0, ss.phis, ss.qs, idx, ss.lo, ss.hi, n, hm, valid)
-
-    def nuisance_value(self, values: dict[str, float], name: str) -> float:
-        """A nuisance term's parameter: from `values`, else the table's `nuisance.values` (fixed) or
-        `nuisance.start` (the nuisance search's optimum), else its spectral start (`Term.starts`,
-        computed once from the whole record)."""
-        if name in values:
-            return values[name]
-        if self._nuisance_base is None:
-            table = self.base.get("nuisance") or {}
-            given = {k: float(x) for key in ("start", "values") for k, x in (table.get(key) or {}).items()}
-            self._nuisance_base = {**self.extra.starts(self._facts), **given}
-        return self._nuisance_base[name]
+        return Components(mean, ss.phis[-1], ss.qs[-1], ss.h, r, ss.p0, ss.phis, ss.qs, idx, ss, h.size, valid)
 
     def _engine(self, c: Components, white: np.ndarray | None = None, lls: np.ndarray | None = None) -> float:
-        """The block engine on the composed state (`vibinverse.engines.kalman.run_blocks`)."""
+        """The engine on the composed state (`NuisanceState.run`); -inf outside the terms' domain."""
         if not c.valid:
             return -math.inf
-        hold = 0 if c.hm.size else hold_samples(c.phis)
-        return run_blocks(
-            self.series.intensity - c.mean,
-            c.phis,
-            c.qs,
-            c.idx,
-            c.lo,
-            c.hi,
-            c.h,
-            c.r,
-            c.p0,
-            hold=hold,
-            white=white,
-            lls=lls,
-            hm=c.hm,
-            nscaled=c.n_tilt,
-        )
+        return self.nuisance.run(self.series.intensity - c.mean, c.state, c.idx, white=white, lls=lls)
 
     def _geometry_names(self) -> set[str]:
         """Scene values the observation depends on and the frame's dynamics do not: sun, view,
@@ -318,6 +282,7 @@ class FrameModel(SignalModel):
         skip = (
             "sampling.",
             "infer.",
+            "nuisance.",
             "title",
             "noise.",
             "footprint.resolution",
@@ -406,7 +371,7 @@ class FrameModel(SignalModel):
         lines = len(self.base["surfaces"][self.roof]["motion"].get("drive_frequency", []) or [])
         for n in ("drive_frequency", "drive_amplitude", "drive_phase"):
             names |= {f"{k}{n}[{i}]" for i in range(lines)} | ({k + n} if lines else set())
-        names |= set(self.extra.names())
+        names |= set(self.nuisance.names())
         return names if self.nuisance.white else names - {"noise.sigma"}
 
     def line_value(self, values: dict[str, float], name: str, i: int) -> float:
@@ -443,7 +408,7 @@ class FrameModel(SignalModel):
         """The frame model of the first n samples (the same scene and filter: per-step on a stretch
         of irregular stamps that happens to be uniform)."""
         # the whole record's facts: a gain drift's cosines, the 1/f states and the starts span it
-        return FrameModel(self.base, self.series.head(n), per_step=self.per_step, facts=self._facts)
+        return FrameModel(self.base, self.series.head(n), per_step=self.per_step, facts=self.nuisance.facts)
 
     def pointwise_log_likelihood(self, values: dict[str, float]) -> np.ndarray:
         """Each sample's one-step predictive log density log p(y_k | y_1..y_{k-1}) (the Kalman
@@ -478,8 +443,7 @@ class FrameModel(SignalModel):
                 f"replicate: {self.key}tilt_damping_ratio = 0 with base noise has no stationary state to start from"
             )
         if c.composed:
-            draw = simulate_blocks(c.phis, c.qs, c.idx, c.lo, c.hi, c.h, c.r, c.p0, rng, hm=c.hm, nscaled=c.n_tilt)
-            out = c.mean + draw
+            out = c.mean + self.nuisance.simulate(c.state, c.idx, rng)
         else:
             out = c.mean + simulate(*c.tables(), c.h, c.r, c.p0, rng)
         out[self.series.gaps] = np.nan
@@ -502,7 +466,7 @@ class FrameModel(SignalModel):
             k + "drive_phase": Prior("uniform", (-np.pi, np.pi)),
             k + "noise_rms": Prior("loguniform", (1e-7, 1e-1)),
             **({"noise.sigma": Prior("loguniform", (1e-8, 1e3))} if self.nuisance.white else {}),
-            **self.extra.priors(self._facts),
+            **self.nuisance.priors(),
         }
 
     def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
@@ -510,7 +474,7 @@ class FrameModel(SignalModel):
         the nuisance terms' from their spectral starts (`Term.starts`)."""
         out = frame_guesses(self.series, self, bounds)
         for g in out:
-            g.update({n: self.nuisance_value({}, n) for n in self.extra.names()})
+            g.update({n: self.nuisance.value({}, n) for n in self.nuisance.names()})
             if not self.nuisance.white:
                 g.pop("noise.sigma", None)
         return out
@@ -530,7 +494,7 @@ class FrameModel(SignalModel):
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
         """Mean term through the Kalman filter plus Whittle's covariance term (`vibinverse.fisher`);
         with nuisance terms the observed information (finite differences of the exact likelihood)."""
-        if not self.extra:
+        if not self.nuisance:
             return frame_fisher(self, values, names)
         v0 = {n: values[n] if n in values else self._value(n) for n in names}
         return observed_information(
@@ -543,28 +507,28 @@ class FrameModel(SignalModel):
 
     def nuisance_priors(self) -> dict[str, Prior]:
         """The nuisance terms' default priors (`Term.priors`)."""
-        return self.extra.priors(self._facts)
+        return self.nuisance.priors()
 
     def _value(self, name: str) -> float:
         """A parameter's value when not given: a nuisance term's start, else the scene's."""
-        return self.nuisance_value({}, name) if name in self.extra.names() else self.base_value(name)
+        return self.nuisance.value({}, name) if name in self.nuisance.names() else self.base_value(name)
 
     def describe(self) -> dict[str, Any] | None:
         """The nuisance terms beside the tilt modes, when there are any."""
-        if not self.extra and self.nuisance.white:
+        if not self.nuisance and self.nuisance.white:
             return None
-        return {"kind": "frame", "nuisance": self.nuisance.table(), "terms": self.nuisance.describe()}
+        return {"kind": "frame", "nuisance": self.nuisance.spec.table(), "terms": self.nuisance.spec.describe()}
 
     def units(self, name: str) -> tuple[str, str]:
         """A nuisance term's own units (`Term.units`), else by the name (`SignalModel.units`)."""
-        found = self.extra.units(name, intensity_units(self.series))
+        found = self.nuisance.terms.units(name, intensity_units(self.series))
         return found if found is not None else super().units(name)
 
     def casadi_objective(self, posterior: Posterior) -> Any:
         """`frame_casadi.CasadiFrameObjective`; Unsupported when a geometry value is free (the
         casadi form holds the observation fixed)."""
-        if self.extra or not self.nuisance.white:
-            raise Unsupported(f"the casadi MAP has no nuisance terms ({self.nuisance.describe()}) yet")
+        if self.nuisance or not self.nuisance.white:
+            raise Unsupported(f"the casadi MAP has no nuisance terms ({self.nuisance.spec.describe()}) yet")
         geometry = self.geometry_free(posterior.space.names)
         if geometry:
             raise Unsupported(f"the casadi MAP holds the observation fixed; {', '.join(geometry)} re-form it")
@@ -612,7 +576,7 @@ class FrameModel(SignalModel):
         g the tilt's stationary rms plus the drive's tilt amplitude, at `values` (others from the
         scene). Small on the specular lobe centre or over a symmetric footprint (J -> 0)."""
         c = self.components({**values, self.key + "drive_amplitude": 0.0})
-        n = c.n_tilt if c.composed else c.h.size
+        n = c.n_own if c.composed else c.h.size
         g_noise = float(np.sqrt(max(np.trace(c.p0[:n, :n]) / max(n // 2, 1), 0.0)))
         drive = self.components({**values, self.key + "noise_rms": 0.0}).mean
         j = float(np.linalg.norm(self.jac))

@@ -33,7 +33,7 @@ import numpy as np
 
 from vibinverse.errors import DataError, SceneError, Unsupported
 from vibinverse.io.series import Series
-from vibinverse.models.base import build_model
+from vibinverse.models.base import SignalModel, build_model
 from vibinverse.optimize import maximize
 from vibinverse.posterior import Posterior
 from vibinverse.priors import Prior
@@ -93,10 +93,10 @@ def _with_spec(table: dict[str, Any], spec: NuisanceSpec) -> dict[str, Any]:
     return out
 
 
-def _posterior(
-    table: dict[str, Any], series: Series, spec: NuisanceSpec, free: dict[str, Prior] | None, model: str | None
-) -> Posterior:
-    m = build_model(_with_spec(table, spec), series, model)
+def _posterior(scene_model: SignalModel, spec: NuisanceSpec, free: dict[str, Prior] | None) -> Posterior:
+    """The posterior of the scene's model with the terms of `spec` (`SignalModel.with_nuisance`);
+    the analyst's free parameters, the nuisance terms' beside them."""
+    m = scene_model.with_nuisance({**(scene_model.base.get("nuisance") or {}), **spec.table()})
     priors = None if free is None else {**m.nuisance_priors(), **free}
     return Posterior(m, priors)
 
@@ -122,7 +122,8 @@ def search_nuisance(
     t0 = time.perf_counter()
     fixed = fixed_keys(table)
     spec = NuisanceSpec.from_table(table)
-    post = _posterior(table, series, spec, free, model)
+    scene_model = build_model(_with_spec(table, spec), series, model)
+    post = _posterior(scene_model, spec, free)
     base = run(post, "casadi", progress=False)
     current = _fit(post, base.point, list(post.space.names), spec)
     criterion = [
@@ -138,7 +139,7 @@ def search_nuisance(
                     continue
                 seen.add(proposal)
                 try:
-                    cand = _posterior(table, series, proposal, free, model)
+                    cand = _posterior(scene_model, proposal, free)
                 except (SceneError, DataError, Unsupported) as exc:
                     logger.info("nuisance search: %s not tried (%s)", what, exc)
                     continue

@@ -2,7 +2,8 @@
 parameters, priors, starts, state-space block, observation row, PSD and description; `nuisance`
 builds the nuisance terms a table or the command line asks for."""
 
-from vibinverse.terms.base import TERMS, DataFacts, StateSpace, Term, TermSum, register_term
+from vibinverse.engines.state_space import StateSpace
+from vibinverse.terms.base import TERMS, DataFacts, Term, TermSum, register_term
 from vibinverse.terms.drift import GainDrift, IntegratedWalk, RandomWalk
 from vibinverse.terms.noise import AR1, Flicker, White
 from vibinverse.terms.resonance import Oscillator

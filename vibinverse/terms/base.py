@@ -30,6 +30,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from vibinverse.engines.kalman import run_blocks
+from vibinverse.engines.state_space import StateSpace
 from vibinverse.io.series import Series
 from vibinverse.priors import Prior
 
@@ -65,24 +66,6 @@ class DataFacts:
             time=t,
             intensity=y,
         )
-
-
-@dataclass
-class StateSpace:
-    """The tables of a composed model at some values: (phis, qs) per distinct step, the initial
-    covariance p0, the observation row h, the white measurement variance r, the block of each state
-    (lo, hi), how many leading states the gain drift multiplies (`nscaled`) and the multiplier per
-    sample (`hm`; empty without a gain drift)."""
-
-    phis: np.ndarray
-    qs: np.ndarray
-    p0: np.ndarray
-    h: np.ndarray
-    r: float
-    lo: np.ndarray
-    hi: np.ndarray
-    nscaled: int
-    hm: np.ndarray
 
 
 class Term(ABC):
@@ -277,7 +260,7 @@ class TermSum:
             steps, idx = unique_steps(series.time, rtol=1e-9)
         ss = self.state_space(values, steps, facts)
         if ss.h.size == 0:  # white noise alone: one state nobody sees
-            ss = _one_dummy_state(ss, steps.size)
+            ss = one_dummy_state(ss, steps.size)
         if ss.hm.size and not ss.hm.min() > 0.0:
             return -math.inf
         y = series.intensity
@@ -320,7 +303,7 @@ class TermSum:
         return g @ g.T
 
 
-def _one_dummy_state(ss: StateSpace, steps: int) -> StateSpace:
+def one_dummy_state(ss: StateSpace, steps: int) -> StateSpace:
     """A state space with one unseen, unmoving state (the engine needs at least one)."""
     z = np.zeros((steps, 1, 1))
     return StateSpace(

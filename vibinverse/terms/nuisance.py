@@ -12,9 +12,10 @@ from typing import Any
 import numpy as np
 
 from vibinverse.engines.kalman import run_blocks, simulate_blocks
+from vibinverse.engines.state_space import StateSpace
 from vibinverse.errors import SceneError
 from vibinverse.priors import Prior
-from vibinverse.terms.base import DataFacts, StateSpace, Term, TermSum
+from vibinverse.terms.base import DataFacts, Term, TermSum, one_dummy_state
 from vibinverse.terms.drift import GAIN_TERMS, GainDrift, IntegratedWalk, RandomWalk
 from vibinverse.terms.noise import AR1, Flicker, White
 
@@ -164,6 +165,8 @@ class NuisanceState:
             o += size
         ss.r = r
         ss.hm = ss.hm[:samples]
+        if ss.h.size == 0:  # no state at all (white noise and a gain drift): one nobody sees
+            ss = one_dummy_state(ss, steps.size)
         if ss.hm.size:
             valid = valid and bool(ss.hm.min() > 0.0)  # 1 + g must stay positive
         return ss, valid

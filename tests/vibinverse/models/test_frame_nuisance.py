@@ -55,7 +55,7 @@ def test_without_nuisance_terms_the_frame_model_is_unchanged():
     table = frame("sampling.duration=2.0", "noise.sigma=0.6")
     data = _series(table)
     model = build_model(table, data)
-    assert not model.extra and not model.components({}).composed
+    assert not model.nuisance and not model.components({}).composed
     assert model.describe() is None
     composed = build_model({**table, "nuisance": {"noise": "ar1"}}, data)
     # an AR(1) term of (nearly) no variance changes the likelihood by rounding only
