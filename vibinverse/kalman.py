@@ -4,7 +4,8 @@
 
 O(T n^3) for n states, scalar observations; a NaN observation is a gap: the update is skipped, and
 the likelihood is that of the observed samples only. The filter is the hot loop of every fit, so it
-runs as a compiled numba kernel (`filter_steps`; `filter_two_states` for the common n = 2, one
+runs as the engine's compiled kernels (`vibinverse.engines.kalman`: `filter_steps` runs its
+`block_filter`; `filter_two_states` for the common n = 2, one
 oscillator, in scalars, ~5x faster); `log_likelihood_reference` is the same recursion in numpy,
 for tests. Once the Riccati recursion has converged (to ~1e-14, over one period of the
 slowest oscillation: `hold_samples`), the gain is held until a gap or another step, and a step
@@ -25,9 +26,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import expm, solve_discrete_lyapunov
 
-from vibinverse.engines.kalman import (  # the one recursion; its hold test and compiler live there
+from vibinverse.engines.kalman import (  # the one recursion, its one-oscillator kernel and compiler live there
     block_layout,
-    is_calm,
+    filter_two_states,
     njit,
     run_blocks,
 )
@@ -92,20 +93,12 @@ def _two_state_angles(phis: NDArray[np.float64]) -> NDArray[np.float64] | None:
 
 
 def log_likelihood_reference(y, phi, q, h, r, p0) -> float:
-    """The same recursion in plain numpy (slow; for tests)."""
-    n = phi.shape[0]
-    x, p, ll = np.zeros(n), np.array(p0, dtype=float), 0.0
-    for k, yk in enumerate(y):
-        if k > 0:
-            x, p = phi @ x, phi @ p @ phi.T + q
-        if not np.isfinite(yk):
-            continue
-        s = h @ p @ h + r
-        v = yk - h @ x
-        gain = p @ h / s
-        x, p = x + gain * v, p - np.outer(gain, h @ p)
-        ll += -0.5 * (np.log(s) + _LOG_2PI + v * v / s)
-    return float(ll)
+    """The same recursion in plain numpy (slow; for tests): `log_likelihood_steps_reference` with
+    one step for every sample."""
+    y = np.asarray(y, dtype=float)
+    return log_likelihood_steps_reference(
+        y, np.asarray(phi)[None], np.asarray(q)[None], np.zeros(y.size, dtype=np.int64), h, r, p0
+    )
 
 
 def stationary_covariance(phi: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -142,127 +135,6 @@ def filter_steps(y, phis, qs, idx, h, r, p0, white, lls, freeze) -> float:
     idx = np.zeros(len(y), dtype=np.int64) if len(idx) == 0 else idx
     lo, hi = block_layout(np.asarray(phis), np.asarray(qs), np.asarray(p0))
     return run_blocks(y, phis, qs, idx, lo, hi, h, r, p0, hold=freeze, white=white, lls=lls)
-
-
-@njit(cache=True, fastmath=False, nogil=True)
-def filter_two_states(
-    y, phis, qs, idx, h, r, p0, white, lls, freeze
-):  # pragma: no cover - compiled; checked against `filter_steps` and the reference
-    """`filter_steps` for n = 2 states (one oscillator: the frame's tilt, a single resonance), the
-    same recursion, gaps, outputs and gain hold, with the state and the covariance's three
-    distinct entries in scalars: 2-3x faster than the general loops, whose tiny inner loops keep
-    x and P in memory (measured 36 against 90-110 ns a sample, 4000 samples)."""
-    uniform = idx.shape[0] == 0
-    h0, h1 = h[0], h[1]
-    x0 = x1 = 0.0
-    p00, p01, p11 = p0[0, 0], 0.5 * (p0[0, 1] + p0[1, 0]), p0[1, 1]
-    f00 = f01 = f11 = 0.0  # the covariance at the hold
-    g0 = g1 = 0.0  # the held gain
-    pg0 = pg1 = 0.0  # the previous sample's gain
-    prev_s = 0.0
-    have_prev = False
-    prev_u = -1
-    last_delta = np.inf
-    frozen = False
-    calm = 0
-    fu = -1
-    log_norm, inv_sf, inv_root = 0.0, 1.0, 1.0
-    ll = 0.0
-    u = 0
-    a00, a01, a10, a11 = phis[0, 0, 0], phis[0, 0, 1], phis[0, 1, 0], phis[0, 1, 1]
-    q00, q01, q11 = qs[0, 0, 0], 0.5 * (qs[0, 0, 1] + qs[0, 1, 0]), qs[0, 1, 1]
-    loaded = 0
-    for k in range(y.shape[0]):
-        yk = y[k]
-        observed = yk == yk  # NaN: a gap
-        if k > 0:
-            if not uniform:
-                u = idx[k]
-                if u != loaded:
-                    a00, a01, a10, a11 = phis[u, 0, 0], phis[u, 0, 1], phis[u, 1, 0], phis[u, 1, 1]
-                    q00, q01, q11 = qs[u, 0, 0], 0.5 * (qs[u, 0, 1] + qs[u, 1, 0]), qs[u, 1, 1]
-                    loaded = u
-            t0 = a00 * x0 + a01 * x1
-            x1 = a10 * x0 + a11 * x1
-            x0 = t0
-            if frozen and (u != fu or not observed):  # the held gain no longer applies
-                frozen = False
-                p00, p01, p11 = f00, f01, f11
-                have_prev = False
-                last_delta = np.inf
-            if frozen:
-                v = yk - h0 * x0 - h1 * x1
-                x0 += g0 * v
-                x1 += g1 * v
-                lk = log_norm - 0.5 * v * v * inv_sf
-                ll += lk
-                if lls.shape[0]:
-                    lls[k] = lk
-                if white.shape[0]:
-                    white[k] = v * inv_root
-                continue
-            m00 = a00 * p00 + a01 * p01
-            m01 = a00 * p01 + a01 * p11
-            m10 = a10 * p00 + a11 * p01
-            m11 = a10 * p01 + a11 * p11
-            n00 = m00 * a00 + m01 * a01 + q00
-            n01 = 0.5 * ((m00 * a10 + m01 * a11) + (m10 * a00 + m11 * a01)) + q01
-            n11 = m10 * a10 + m11 * a11 + q11
-            p00, p01, p11 = n00, n01, n11
-        if not observed:
-            have_prev = False
-            if white.shape[0]:
-                white[k] = np.nan
-            if lls.shape[0]:
-                lls[k] = np.nan
-            continue
-        ph0 = p00 * h0 + p01 * h1
-        ph1 = p01 * h0 + p11 * h1
-        s = r + h0 * ph0 + h1 * ph1
-        v = yk - h0 * x0 - h1 * x1
-        if not s > 0.0:
-            if lls.shape[0]:
-                lls[k:] = -np.inf
-            return -np.inf
-        k0, k1 = ph0 / s, ph1 / s
-        x0 += ph0 * v / s
-        x1 += ph1 * v / s
-        p00 -= ph0 * ph0 / s
-        p01 -= ph0 * ph1 / s
-        p11 -= ph1 * ph1 / s
-        lk = -0.5 * (math.log(s) + _LOG_2PI + v * v / s)
-        ll += lk
-        if lls.shape[0]:
-            lls[k] = lk
-        if white.shape[0]:
-            white[k] = v / math.sqrt(s)
-        if freeze:
-            if have_prev and u == prev_u:
-                scale = max(abs(k0), abs(k1))  # `gain_change`
-                delta = abs(s - prev_s) / s
-                d0, d1 = abs(k0 - pg0), abs(k1 - pg1)
-                if d0 > 0.0:
-                    delta = max(delta, d0 / scale)
-                if d1 > 0.0:
-                    delta = max(delta, d1 / scale)
-                calm = calm + 1 if is_calm(delta, last_delta) else 0
-                if calm >= freeze:
-                    calm = 0
-                    frozen = True
-                    fu = u
-                    log_norm = -0.5 * (math.log(s) + _LOG_2PI)
-                    inv_sf = 1.0 / s
-                    inv_root = 1.0 / math.sqrt(s)
-                    g0, g1 = k0, k1
-                    f00, f01, f11 = p00, p01, p11
-                last_delta = delta
-            else:
-                calm = 0
-            pg0, pg1 = k0, k1
-            prev_s = s
-            prev_u = u
-            have_prev = True
-    return ll
 
 
 def run_filter(y, phis, qs, idx, h, r, p0, white, lls) -> float:

@@ -22,7 +22,7 @@ observation is r sequential scalar updates (rows of L^-1 H, unit noise variance 
     log p(Z) = sum_t [log N(L^-1 (Z_t - m_t); L^-1 H x_t|t-1, L^-1 H P L^-T H^T + scale^2 I)]
                - T_obs log det L,
 
-the second term the Jacobian of the whitening (compiled kernel `_vector_filter`, numba nogil,
+the second term the Jacobian of the whitening (the engine's `vibinverse.engines.kalman.vector_filter`, numba nogil,
 O(T (n^2 + r n^2)) for n = 2 x modes states). A sample with NaN outputs observes the others only
 (the Cholesky factor of their block of C); an all-NaN sample is a gap; irregular stamps use the
 modal model's table of distinct steps (`ModalModel.steps`, `.idx`).
@@ -51,9 +51,10 @@ from typing import Any
 
 import numpy as np
 
+from vibinverse.engines.kalman import vector_filter
 from vibinverse.errors import SceneError
 from vibinverse.io.series import Series, validate
-from vibinverse.kalman import njit, simulate
+from vibinverse.kalman import simulate
 from vibinverse.models.base import LineTest, SignalModel, observed_information, register_model
 from vibinverse.models.modal import ModalModel
 from vibinverse.priors import Prior
@@ -111,128 +112,6 @@ def multi_series(
 
 
 # ------------------------------------------------------------------ compiled kernels
-
-
-@njit(cache=True, fastmath=False, nogil=True)
-def _vector_filter(d, phis, qs, idx, lo, hi, h, cov, scale2, p0, white, lls):  # pragma: no cover - compiled
-    """log p of d_t = H x_t + v_t (d: (T, r), NaN = not observed; v ~ N(0, cov scale2)), x_t =
-    Phi x_{t-1} + w_t with Phi = phis[idx[t]] block diagonal (state i's block lo[i]..hi[i]) and
-    x_0 ~ N(0, P0): per sample, the Cholesky factor L of the observed block of cov, the whitened
-    L^-1 d and L^-1 H, r sequential scalar updates and the Jacobian -log det L (module docstring).
-    Standardized innovations to `white` (T, r) and each sample's log density to `lls` when they
-    are not empty (NaN where not observed)."""
-    nt, r = d.shape
-    n = p0.shape[0]
-    x = np.zeros(n)
-    xp = np.zeros(n)
-    p = p0.copy()
-    tmp = np.zeros((n, n))
-    ph = np.zeros(n)
-    lc = np.zeros((r, r))
-    hw = np.zeros((r, n))
-    v = np.zeros(r)
-    obs = np.zeros(r, dtype=np.int64)
-    prev = -1  # the observed pattern whose factor lc holds: r (all), else recomputed
-    logdet = 0.0
-    ll = 0.0
-    for k in range(nt):
-        if k > 0:
-            u = idx[k]
-            for i in range(n):
-                acc = 0.0
-                for m in range(lo[i], hi[i]):
-                    acc += phis[u, i, m] * x[m]
-                xp[i] = acc
-            for i in range(n):
-                x[i] = xp[i]
-            for i in range(n):  # tmp = Phi P
-                for j in range(n):
-                    acc = 0.0
-                    for m in range(lo[i], hi[i]):
-                        acc += phis[u, i, m] * p[m, j]
-                    tmp[i, j] = acc
-            for i in range(n):  # P = tmp Phi^T + Q
-                for j in range(i, n):
-                    acc = qs[u, i, j]
-                    for m in range(lo[j], hi[j]):
-                        acc += tmp[i, m] * phis[u, j, m]
-                    p[i, j] = acc
-                    p[j, i] = acc
-        m_obs = 0
-        for j in range(r):
-            if d[k, j] == d[k, j]:
-                obs[m_obs] = j
-                m_obs += 1
-        if m_obs == 0:
-            if lls.shape[0]:
-                lls[k] = np.nan
-            if white.shape[0]:
-                for j in range(r):
-                    white[k, j] = np.nan
-            continue
-        if not (m_obs == r and prev == r):  # the Cholesky factor of the observed block, and L^-1 H
-            for a in range(m_obs):
-                for b in range(a + 1):
-                    acc = cov[obs[a], obs[b]] * scale2
-                    for c in range(b):
-                        acc -= lc[a, c] * lc[b, c]
-                    if a == b:
-                        if not acc > 0.0:
-                            if lls.shape[0]:
-                                lls[k:] = -np.inf
-                            return -np.inf
-                        lc[a, a] = math.sqrt(acc)
-                    else:
-                        lc[a, b] = acc / lc[b, b]
-            logdet = 0.0
-            for a in range(m_obs):
-                logdet += math.log(lc[a, a])
-                for i in range(n):
-                    acc = h[obs[a], i]
-                    for c in range(a):
-                        acc -= lc[a, c] * hw[c, i]
-                    hw[a, i] = acc / lc[a, a]
-            prev = m_obs if m_obs == r else -1
-        for a in range(m_obs):  # the whitened observations
-            acc = d[k, obs[a]]
-            for c in range(a):
-                acc -= lc[a, c] * v[c]
-            v[a] = acc / lc[a, a]
-        lk = -logdet
-        for a in range(m_obs):
-            s = 1.0
-            e = v[a]
-            for i in range(n):
-                acc = 0.0
-                for j in range(n):
-                    acc += p[i, j] * hw[a, j]
-                ph[i] = acc
-            for i in range(n):
-                s += hw[a, i] * ph[i]
-                e -= hw[a, i] * x[i]
-            if not s > 0.0:
-                if lls.shape[0]:
-                    lls[k:] = -np.inf
-                return -np.inf
-            for i in range(n):
-                x[i] += ph[i] * e / s
-            for i in range(n):
-                g = ph[i] / s
-                for j in range(i, n):
-                    val = p[i, j] - g * ph[j]
-                    p[i, j] = val
-                    p[j, i] = val
-            lk += -0.5 * (math.log(s) + _LOG_2PI + e * e / s)
-            if white.shape[0]:
-                white[k, obs[a]] = e / math.sqrt(s)
-        if white.shape[0]:
-            for j in range(r):
-                if d[k, j] != d[k, j]:
-                    white[k, j] = np.nan
-        ll += lk
-        if lls.shape[0]:
-            lls[k] = lk
-    return ll
 
 
 # ------------------------------------------------------------------ the model
@@ -396,7 +275,7 @@ class MultiOutputModel(SignalModel):
         means, phis, qs, p0 = self.tables(values)
         scale2 = self.value(values, "noise.scale") ** 2
         d = self.z - means
-        return float(_vector_filter(d, phis, qs, self.idx, self.lo, self.hi, self.h, self.cov, scale2, p0, white, lls))
+        return float(vector_filter(d, phis, qs, self.idx, self.lo, self.hi, self.h, self.cov, scale2, p0, white, lls))
 
     # -------------------------------------------------------------- SignalModel
     def fittable(self) -> set[str]:
