@@ -536,12 +536,7 @@ class DeterministicModel(SignalModel):
         """Periodogram peaks in each frequency prior and in twice it (taken as 2f), amplitudes and
         phases calibrated through the forward model (`deterministic_spectral.response_guesses`);
         the nuisance terms' from their spectral starts."""
-        out = response_guesses(self.series, self, bounds)
-        for g in out:
-            g.update({n: self.nuisance.value({}, n) for n in self.nuisance.names()})
-            if not self.nuisance.white:
-                g.pop("noise.sigma", None)
-        return out
+        return self.nuisance.complete(response_guesses(self.series, self, bounds))
 
     def nuisance_priors(self) -> dict[str, Prior]:
         """The nuisance terms' default priors (`Term.priors`)."""

@@ -476,12 +476,7 @@ class FrameModel(SignalModel):
     def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
         """One start per plausible drive line, most steady first (`frame_spectral.frame_guesses`),
         the nuisance terms' from their spectral starts (`Term.starts`)."""
-        out = frame_guesses(self.series, self, bounds)
-        for g in out:
-            g.update({n: self.nuisance.value({}, n) for n in self.nuisance.names()})
-            if not self.nuisance.white:
-                g.pop("noise.sigma", None)
-        return out
+        return self.nuisance.complete(frame_guesses(self.series, self, bounds))
 
     def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
         """The drive line (its amplitude to 0) and the tilt resonance (the base noise to 0)."""

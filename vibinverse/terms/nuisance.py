@@ -129,6 +129,15 @@ class NuisanceState:
     def priors(self) -> dict[str, Prior]:
         return self.terms.priors(self.facts)
 
+    def complete(self, guesses: list[dict[str, float]]) -> list[dict[str, float]]:
+        """The model's starting values with the terms' added (and the white noise's sigma dropped
+        when the spec has none), in place."""
+        for g in guesses:
+            g.update({n: self.value({}, n) for n in self.names()})
+            if not self.white:
+                g.pop("noise.sigma", None)
+        return guesses
+
     def value(self, values: Mapping[str, float], name: str) -> float:
         """A nuisance parameter's value (class docstring)."""
         if name in values:
