@@ -30,6 +30,10 @@ failures and the wall time per fit.
 
 The rows also carry what the data can decide (`robustness_oracle.oracle`): the fractions of the
 true components whose gain in log-likelihood passes the order search's threshold.
+
+The scene column (`robustness_scene`, `vibinverse bench --robustness --scene`): the same departures
+on data simulated from roof_frame.toml, fitted with that scene; `with_scene` puts its result under
+"scene" beside the modal columns, and `table` prints it below theirs.
 """
 
 from __future__ import annotations
@@ -459,6 +463,12 @@ def _case_rows(case: str, fitters: Sequence[Fitter], per: list[list[dict]], note
     return rows
 
 
+def with_scene(result: dict[str, Any] | None, scene: dict[str, Any]) -> dict[str, Any]:
+    """`result` (an earlier run's, or None) with the scene column (`robustness_scene.run`) under
+    "scene": a scene run adds to robustness.json instead of replacing its modal columns."""
+    return {**(result or {}), "scene": scene}
+
+
 def table(result: dict[str, Any]) -> str:
     """The rows as a fixed-width text table (with the skipped peers and the notes below it):
     n_iv is the number of intervals the coverage rests on; z_rsd and far how they miss (`score`:
@@ -474,7 +484,7 @@ def table(result: dict[str, Any]) -> str:
         f"{'case':<12}{'method':<11}{'parameter':<16}{'med_rel_err':>12}{'cover90':>8}{'+-se':>6}{'n_iv':>5}{'z_rsd':>6}{'far':>5}"
         f"{'missed':>7}{'found':>6}{'line_det':>9}{'oracle':>7}{'or_kf':>6}{'or_rf':>6}{'false_det':>10}{'failed':>8}{'s/fit':>8}"
     ]
-    for r in result["rows"]:
+    for r in result.get("rows", []):
         lines.append(
             f"{r['case']:<12}{r['method']:<11}{r['param']:<16}{fmt(r['median_rel_error'], '12.2e')}"
             f"{fmt(r['coverage90'], '8.2f')}{fmt(r['coverage_se'], '6.2f')}{r['n_intervals']:>5}"
@@ -487,6 +497,10 @@ def table(result: dict[str, Any]) -> str:
     for name, why in result.get("skipped", {}).items():
         lines.append(f"skipped {name}: {why}")
     lines += [f"note: {n}" for n in result.get("notes", [])]
+    if result.get("scene"):
+        from vibinverse.bench.robustness_scene import table as scene_table
+
+        lines += ["", "scene column (roof_frame.toml):", scene_table(result["scene"])]
     return "\n".join(lines)
 
 
