@@ -11,6 +11,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from threadpoolctl import threadpool_limits
+
 from vibinverse.errors import InputError, scene_errors
 from vibinverse.io.scenes import load_scene
 from vibinverse.io.series import Series, load_series
@@ -201,6 +203,10 @@ def reading_intervals(post: Posterior, readings: Mapping[str, Any], entries: lis
             entry["advice"] = f"{entry.get('advice', '')} {label}, 90 % intervals: {said}.".strip()
 
 
+# one BLAS thread through a fit: its matrices are tiny (the filters are compiled loops) and OpenBLAS's
+# threads only contend: an 8-parameter L-BFGS-B (the order and nuisance searches' `maximize`) took 170 ms
+# with its default 2 threads on a busy 2-core machine, 9 ms with one (the benches always ran so)
+@threadpool_limits.wrap(limits=1, user_api="blas")
 def fit_series(
     series: SeriesLike,
     scene: SceneLike | None = None,
