@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import re
 import sys
 from typing import Any
@@ -24,6 +25,7 @@ DETECTION, DETECTION_PLOT, LINES = "detection.nc", "detection.png", "lines.csv" 
 DEFAULT_OUTPUT = "detect"
 DEFAULT_MEMORY = "512MiB"  # vibinverse.imaging.detection_map.DEFAULT_MEMORY, as the option shows it
 CHANNELS = ("luminance", "r", "g", "b")  # vibinverse.io.cube's channels
+LOGGED_CLUSTERS = 5  # the log names a line's strongest clusters; lines.csv has them all
 
 
 # ------------------------------------------------------------------------------------ the parser
@@ -144,10 +146,16 @@ def cmd_detect(args: argparse.Namespace) -> dict[str, Any]:
             }
         )
     for line in result.lines:
-        where = ", ".join(f"cluster {c.cluster} ({c.n_pixels} px)" for c in line.clusters)
+        shown = line.clusters[:LOGGED_CLUSTERS]
+        where = ", ".join(f"cluster {c.cluster} ({c.n_pixels} px)" for c in shown)
+        if len(line.clusters) > len(shown):
+            rest = line.clusters[len(shown) :]
+            where += f" and {len(rest)} more ({sum(c.n_pixels for c in rest)} px)"
+        what = "" if line.claimed else f" [{line.kind}: not claimed as vibration; {line.reason}]"
+        alias = f" (or {line.alias_frequency:.6g} Hz if aliased)" if math.isfinite(line.alias_frequency) else ""
         logger.info(
-            f"line {line.index}: {line.frequency:.6g} Hz, SNR {line.snr:.3g}, false-alarm probability "
-            f"{line.false_alarm_probability:.2g}: {where}"
+            f"line {line.index}: {line.frequency:.6g} Hz{alias}, SNR {line.snr:.3g}, false-alarm probability "
+            f"{line.false_alarm_probability:.2g}: {where}{what}"
         )
     if not result.lines:
         logger.info(f"no line with false-alarm probability < {args.alpha:g}")

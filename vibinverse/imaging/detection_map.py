@@ -34,10 +34,21 @@ pixels that carry any line, numbered 1, 2, ... by decreasing peak SNR; `cluster`
 number (0: none), `line_of_cluster` the cluster's strongest line, `cluster_lines` every line it
 carries (a roof's pixels carry its tilt resonance and its drive together).
 
+Real recordings: every p-value above (a line's, a pixel's) is the larger of the white-noise one and
+the recording's own (`empirical_null`: the pooled whitened powers away from the candidate lines,
+and the exponential tail of the per-frequency maxima over the pixels), gathered in the first pass
+as per-frequency histograms of z (added up in a tree as the blocks finish). Each line is then
+classified (`line_checks`): "vibration" (claimed), or real power of the recording that is not a
+structure's (frame-wide, frame-pattern, unlocated, scattered), reported with the reason; and its
+other reading, fs - f (a line above Nyquist shows below it).
+
 Not searched: the first `LOW_BINS` Fourier frequencies (periods longer than a quarter of the
 record), where drifts and their leakage live. A rolling shutter's per-row time offset
 (coord "row_offset") shifts a row's stamps by a constant: it changes each periodogram's phase,
 never its power, and is ignored here.
+
+Decoded frames (video, MRAW, TIFF: integer counts read in pieces of whole frames, too big to keep)
+are decoded once into a scratch file per block (`spill`) on a local run, instead of once per block.
 
 Chunks: the time axis whole, the frame cut into spatial blocks so that the blocks in flight and
 their float64 work fit `memory` bytes less the kept spectra (`plan_chunks`), each of at most
@@ -56,11 +67,14 @@ combining pixels, which this map prepares).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import itertools
 import logging
+import math
 import numbers
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -70,7 +84,10 @@ import xarray as xr
 from threadpoolctl import threadpool_limits
 
 from vibinverse.errors import DataError, InputError
+from vibinverse.imaging.empirical_null import Z_EDGES, EmpiricalNull, z_counts
+from vibinverse.imaging.line_checks import VIBRATION, LineEvidence, classify
 from vibinverse.imaging.scheduler import session
+from vibinverse.imaging.spill import Spill
 from vibinverse.imaging.whitening import (
     TINY,
     Floor,
@@ -100,6 +117,7 @@ BATCH_BYTES = 2**20  # float64 series per batch: ~1 MiB stays in a core's cache 
 # costs ~5 ms of fixed overhead through xarray and HDF5, and fresh pages cost too (measured, 64 x 64 x 4000)
 BLOCK_BYTES = 32 * 2**20
 SLAB_BYTES = 32 * 2**20
+LABELLED_CLUSTERS = 12  # the plot labels the strongest clusters only (a real video may have hundreds)
 SPLIT_EVERY = 4  # the second pass adds its slabs' sums 4 at a time
 
 
@@ -155,6 +173,7 @@ def first_pass(block: Any, grid: FrequencyGrid, batch: int, keep: bool = False) 
     mean = np.zeros(npix)
     coef, scale = np.zeros((npix, grid.baseline_basis[0].shape[1])), np.zeros((npix, grid.windows[0].size))
     zmax = np.zeros(grid.n_searched)
+    counts = np.zeros((grid.n_searched, Z_EDGES.size), dtype=np.int64)
     band = np.arange(grid.lo, grid.hi)
     for sl, m, power in _batches(block, grid, batch):
         z, floor = whiten_rows(power, grid, band)
@@ -167,6 +186,7 @@ def first_pass(block: Any, grid: FrequencyGrid, batch: int, keep: bool = False) 
         mean[sl] = m
         coef[sl], scale[sl] = floor.coef, floor.scale
         np.maximum(zmax, z.max(axis=0), out=zmax)
+        counts += z_counts(z)
         if kept is not None:
             kept[sl] = power
     shape = (ny, nx)
@@ -176,6 +196,7 @@ def first_pass(block: Any, grid: FrequencyGrid, batch: int, keep: bool = False) 
         "peak_snr": peak_z.reshape(shape),
         "mean_frame": mean.reshape(shape),
         "band_max": zmax,
+        "z_counts": counts,
         "floor": Floor(coef, scale),
         "power": kept,
     }
@@ -376,6 +397,14 @@ class Line:
     false_alarm_probability: float
     n_pixels: int  # pixels that carry it
     clusters: tuple[LineCluster, ...]
+    kind: str = VIBRATION  # "vibration" (claimed) or what else it is (`line_checks`)
+    reason: str = ""  # why it is not vibration, one sentence
+    alias_frequency: float = math.nan  # Hz: the other reading, fs - frequency (uniform frames)
+
+    @property
+    def claimed(self) -> bool:
+        """Whether the line is claimed as a structure's vibration."""
+        return self.kind == VIBRATION
 
 
 @dataclasses.dataclass
@@ -387,7 +416,8 @@ class DetectionMap:
 
     def table(self) -> list[dict[str, Any]]:
         """One row per (line, cluster): frequency_hz, snr (mean over the cluster's pixels carrying the
-        line), max_snr, false_alarm_probability (the line's), cluster, n_pixels, centroid, bbox."""
+        line), max_snr, false_alarm_probability (the line's), kind ("vibration" when claimed),
+        alias_frequency_hz (the other reading, fs - f), cluster, n_pixels, centroid, bbox."""
         rows = []
         for line in self.lines:
             for c in line.clusters:
@@ -398,6 +428,8 @@ class DetectionMap:
                         "snr": c.mean_snr,
                         "max_snr": c.max_snr,
                         "false_alarm_probability": line.false_alarm_probability,
+                        "kind": line.kind,
+                        "alias_frequency_hz": line.alias_frequency,
                         "cluster": c.cluster,
                         "n_pixels": c.n_pixels,
                         "centroid_y": c.centroid[0],
@@ -445,7 +477,8 @@ class DetectionMap:
 
 
 LINE_TABLE_COLUMNS = (
-    "line", "frequency_hz", "snr", "max_snr", "false_alarm_probability", "cluster", "n_pixels",
+    "line", "frequency_hz", "snr", "max_snr", "false_alarm_probability", "kind", "alias_frequency_hz", "cluster",
+    "n_pixels",
     "centroid_y", "centroid_x", "bbox_y0", "bbox_y1", "bbox_x0", "bbox_x1",
 )  # fmt: skip
 
@@ -470,8 +503,9 @@ def plot_detection(result: DetectionMap, path: str | Path) -> None:
         im = ax.imshow(np.ma.masked_invalid(shown), cmap="inferno", alpha=0.75, interpolation="nearest")
         fig.colorbar(im, ax=ax, shrink=0.8, label="SNR of the pixel's strongest line (whitened power)")
         cluster = ds["cluster"].values
-        for k in ds["cluster_id"].values:
-            _outline(ax, cluster == k)
+        ax.add_collection(_outlines(cluster))
+        ids = ds["cluster_id"].values
+        for k in ids[:LABELLED_CLUSTERS]:
             ys, xs = np.nonzero(cluster == k)
             carried = np.flatnonzero(ds["cluster_lines"].sel(cluster_id=k).values)
             label = ", ".join(f"{ds['line_frequency'].values[i]:.3g}" for i in carried)
@@ -485,6 +519,8 @@ def plot_detection(result: DetectionMap, path: str | Path) -> None:
                 bbox={"facecolor": "black", "alpha": 0.5, "pad": 1.0, "linewidth": 0},
             )
         title = f"{len(result.lines)} line(s) detected (false-alarm probability < {ds.attrs['alpha']:g})"
+        if ids.size > LABELLED_CLUSTERS:
+            title += f"; clusters 1-{LABELLED_CLUSTERS} of {ids.size} labelled"
     else:
         with np.errstate(divide="ignore"):
             score = -np.log10(np.maximum(ds["pixel_false_alarm_probability"].values, 1e-300))
@@ -498,13 +534,25 @@ def plot_detection(result: DetectionMap, path: str | Path) -> None:
     plt.close(fig)
 
 
-def _outline(ax: Any, mask: np.ndarray) -> None:
-    """Outline a pixel mask along the pixels' edges (a contour of the mask drawn k times finer)."""
-    k = max(1, min(8, 2048 // max(mask.shape)))
-    fine = np.kron(mask.astype(np.float64), np.ones((k, k)))
-    ys = (np.arange(fine.shape[0]) + 0.5) / k - 0.5
-    xs = (np.arange(fine.shape[1]) + 0.5) / k - 0.5
-    ax.contour(xs, ys, fine, levels=[0.5], colors="cyan", linewidths=1.0)
+def _outlines(cluster: np.ndarray) -> Any:
+    """The outlines of every cluster of the label map `cluster` (y, x; 0: none) along the pixels'
+    edges, as one LineCollection: a segment wherever two neighbouring pixels (or a pixel and the
+    frame's edge) differ in label and one of them is in a cluster. Memory O(pixels), whatever the
+    number of clusters."""
+    from matplotlib.collections import LineCollection
+
+    padded = np.pad(cluster, 1)
+    segments = []
+    # vertical edges between columns j-1 and j (padded), at x = j - 1.5 in pixel coordinates
+    diff = (padded[:, 1:] != padded[:, :-1]) & ((padded[:, 1:] > 0) | (padded[:, :-1] > 0))
+    iy, jx = np.nonzero(diff)
+    x = jx - 0.5
+    segments.append(np.stack([np.stack([x, iy - 1.5], -1), np.stack([x, iy - 0.5], -1)], 1))
+    diff = (padded[1:, :] != padded[:-1, :]) & ((padded[1:, :] > 0) | (padded[:-1, :] > 0))
+    iy, jx = np.nonzero(diff)
+    y = iy - 0.5
+    segments.append(np.stack([np.stack([jx - 1.5, y], -1), np.stack([jx - 0.5, y], -1)], 1))
+    return LineCollection(np.concatenate(segments), colors="cyan", linewidths=1.0)
 
 
 # ------------------------------------------------------------------------------------- the whole map
@@ -522,11 +570,14 @@ def _check_cube(cube: Any) -> xr.DataArray:
     return cube.transpose("time", "y", "x")
 
 
-def _lines_of(band_max: np.ndarray, grid: FrequencyGrid, n_pixels: int, alpha: float, max_lines: int):
+def _lines_of(band_max: np.ndarray, grid: FrequencyGrid, n_pixels: int, alpha: float, max_lines: int, null=None):
     """[(peak bin, largest z, corrected FAP)] of the groups of band frequencies whose largest z over
     the pixels has corrected false-alarm probability < alpha (at most MERGE_GAP bins apart: one
-    line), strongest first."""
+    line), strongest first. The probability is the white-noise one, or with `null` (an
+    `EmpiricalNull`) the larger of it and the recording's own."""
     fap = corrected(log_tail(band_max, grid.half_width), grid.n_searched * n_pixels)
+    if null is not None:
+        fap = np.maximum(fap, null.line_probability(band_max))
     hit = np.flatnonzero(fap < alpha)
     groups = np.split(hit, np.flatnonzero(np.diff(hit) > MERGE_GAP + 1) + 1) if hit.size else []
     runs = []
@@ -607,7 +658,11 @@ def detection_map(
     # `memory` (the rest bounds the blocks in flight); else the second pass reads the cube again
     spectra = n_pixels * grid.n_freq * 8
     keep_spectra = spectra <= int(memory) // 4
-    with session(scheduler, workers, progress=progress) as run, threadpool_limits(1, user_api="blas"):
+    with (
+        session(scheduler, workers, progress=progress) as run,
+        threadpool_limits(1, user_api="blas"),
+        contextlib.ExitStack() as scratch,
+    ):
         budget = int(memory) - (spectra if keep_spectra else 0)
         plan = plan_chunks(cube.shape, cube.dtype.itemsize, run.threads, budget, grid.uniform)
         if cube.chunks is None:  # in memory or a lazy file backend: each block reads its own hyperslab
@@ -620,11 +675,22 @@ def detection_map(
         blocks = blocks_of(data, plan)
         logger.debug(f"detect: {len(blocks)} blocks of {plan.block_y} x {plan.block_x} pixels, batches of {plan.batch}")
         clock = time.perf_counter()
+        spilled = _spill_wanted(data, plan, scheduler, cube.dtype)
+        if spilled:  # decoded frames, not kept: decoded once into a scratch file per block (`spill`)
+            blocks = _spilled(
+                run, data, plan, Path(scratch.enter_context(tempfile.TemporaryDirectory(prefix="vibinverse-")))
+            )
+            logger.debug(f"detect: decoded once into {len(blocks)} block files in {time.perf_counter() - clock:.2f} s")
         if plan.keep:
             arrays = run.persist(*[b for _, _, b in blocks])
             blocks = [(ys, xs, a) for (ys, xs, _), a in zip(blocks, arrays)]
             logger.debug(f"detect: cube read and kept in {time.perf_counter() - clock:.2f} s")
-        first = run.compute(*[_delayed(first_pass)(_pieces(b), grid, plan.batch, keep_spectra) for _, _, b in blocks])
+        passes = [_delayed(first_pass)(_pieces(b), grid, plan.batch, keep_spectra) for _, _, b in blocks]
+        # the histograms of z are added up as the blocks finish (a tree of sums), not held per block
+        sums = [_delayed(_item)(f, "z_counts") for f in passes]
+        while len(sums) > 1:
+            sums = [_delayed(_add)(*sums[i : i + SPLIT_EVERY]) for i in range(0, len(sums), SPLIT_EVERY)]
+        *first, counts = run.compute(*[_delayed(_without)(f, "z_counts") for f in passes], sums[0])
         logger.debug(f"detect: first pass (peaks) {time.perf_counter() - clock:.2f} s")
         maps = {
             k: np.zeros((ny, nx), dtype=first[0][k].dtype)
@@ -639,7 +705,11 @@ def detection_map(
             coef[ys, xs] = part["floor"].coef.reshape(*part["mean_frame"].shape, -1)
             scale[ys, xs] = part["floor"].scale.reshape(*part["mean_frame"].shape, -1)
             np.maximum(band_max, part["band_max"], out=band_max)
-        runs = _lines_of(band_max, grid, n_pixels, float(alpha), max_lines)
+        # the recording's own null, away from the frequencies that pass on white noise
+        candidates = [b - grid.lo for b, _, _ in _lines_of(band_max, grid, n_pixels, float(alpha), grid.n_searched)]
+        null = EmpiricalNull.from_counts(counts, band_max, np.asarray(candidates, dtype=np.int64))
+        runs = _lines_of(band_max, grid, n_pixels, float(alpha), max_lines, null)
+        maps["band_max"] = band_max
         bins = tuple(r[0] for r in runs)
         snr = np.zeros((len(bins), ny, nx))
         freq = np.zeros((len(bins), ny, nx))
@@ -651,21 +721,21 @@ def detection_map(
                     power[ys, xs] = part["power"][:, cols].reshape(power[ys, xs].shape)
                 power = power.reshape(n_pixels, -1)
             else:
-                power = _line_powers(run, data, blocks, grid, cols, plan, maps["mean_frame"], memory)
+                power = _line_powers(run, data, blocks, grid, cols, plan, maps["mean_frame"], memory, spilled)
             floor = Floor(coef.reshape(n_pixels, -1), scale.reshape(n_pixels, -1))
             snr, freq = (m.reshape(len(bins), ny, nx) for m in line_maps(power, floor, grid, bins))
             how = "from the kept spectra" if keep_spectra else "second pass"
             logger.debug(f"detect: SNR maps of {len(bins)} lines, {how}: {time.perf_counter() - clock:.2f} s")
-    log_p = log_tail(maps["peak_snr"], grid.half_width)
+    log_p = _log_p(maps["peak_snr"], grid, null)
     pixel_fap = corrected(log_p, grid.n_searched)
     fap = corrected(log_p, grid.n_searched * n_pixels)
     carries = np.zeros((len(bins), ny, nx), dtype=bool)
     for k, b in enumerate(bins):
         width = min(grid.hi, b + LINE_BINS + 1) - max(grid.lo, b - LINE_BINS)
-        carries[k] = _benjamini_hochberg(corrected(log_tail(snr[k], grid.half_width), width), float(alpha))
+        carries[k] = _benjamini_hochberg(corrected(_log_p(snr[k], grid, null), width), float(alpha))
     cluster, masks = _clusters(snr, carries)
-    lines = _make_lines(runs, grid, snr, freq, carries, cluster, masks)
-    ds = _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, masks, float(alpha), band)
+    lines = _make_lines(runs, grid, snr, freq, carries, cluster, masks, null)
+    ds = _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, masks, float(alpha), band, null)
     logger.info(
         f"detect: {n_pixels} pixels x {grid.n_searched} frequencies ({grid.frequencies[grid.lo]:.4g} to "
         f"{grid.frequencies[grid.hi - 1]:.4g} Hz): {len(lines)} line(s), {len(masks)} cluster(s)"
@@ -673,9 +743,48 @@ def detection_map(
     return DetectionMap(ds, lines)
 
 
-def _line_powers(run, data, blocks, grid, cols, plan, mean_frame, memory) -> np.ndarray:
+def _spill_wanted(data: Any, plan: ChunkPlan, scheduler: str | None, dtype: Any) -> bool:
+    """Whether to decode the cube once into block files (`spill`): integer counts (decoded frames)
+    in pieces of whole frames that span several blocks, not kept in memory, on this machine (a
+    cluster's workers do not share its scratch directory), with room on the scratch disk."""
+    if plan.keep or scheduler is not None or not np.issubdtype(dtype, np.integer) or aligned(data, plan):
+        return False
+    if len(data.chunks[1]) != 1 or len(data.chunks[2]) != 1:
+        return False
+    need = int(np.prod(data.shape)) * np.dtype(dtype).itemsize
+    if not Spill.fits(Path(tempfile.gettempdir()), need):
+        logger.warning(
+            f"detect: no room for {need / 2**20:.0f} MiB of scratch in {tempfile.gettempdir()}: "
+            "the frames are decoded once per block"
+        )
+        return False
+    return True
+
+
+def _spilled(run: Any, data: Any, plan: ChunkPlan, directory: Path) -> list[tuple[slice, slice, Any]]:
+    """The blocks of `blocks_of`, each read from its scratch file, after one decode of the pieces."""
+    import dask.array as da
+
+    cuts = _cuts(data.shape, plan)
+    spill = Spill.create(directory, cuts, data.shape[0], data.dtype)
+    starts = np.cumsum((0, *data.chunks[0]))[:-1]
+    pieces = data.to_delayed().ravel().tolist()
+    run.compute(*[_delayed(spill.write)(piece, int(t0)) for piece, t0 in zip(pieces, starts)])
+    return [
+        (ys, xs, da.from_delayed(_delayed(spill.read)(k), spill.shape(k), dtype=spill.dtype))
+        for k, (ys, xs) in enumerate(cuts)
+    ]
+
+
+def _log_p(z: np.ndarray, grid: FrequencyGrid, null: EmpiricalNull) -> np.ndarray:
+    """ln of a pixel's p-value at whitened power z: the larger of the white-noise tail and the
+    recording's own (`EmpiricalNull.log_tail`)."""
+    return np.maximum(log_tail(z, grid.half_width), null.log_tail(z))
+
+
+def _line_powers(run, data, blocks, grid, cols, plan, mean_frame, memory, spilled=False) -> np.ndarray:
     """Every pixel's powers (pixels, K) at the grid's bins `cols`: on uniform stamps, unless the
-    cube is kept or the sums would not fit, by `slab_sums` over slabs of whole frames, each read
+    cube is kept or spilled or the sums would not fit, by `slab_sums` over slabs of whole frames, each read
     once in tasks of its own (dask fuses the slice into the read: contiguous frames are the
     cheapest reads), added up SPLIT_EVERY at a time; else block by block (`line_powers`)."""
     from dask.graph_manipulation import clone
@@ -695,7 +804,7 @@ def _line_powers(run, data, blocks, grid, cols, plan, mean_frame, memory) -> np.
     # held at worst: every slab's sums (dask may read the slabs ahead of the adds), and per thread a
     # slab as read, its copy and its float64 batches
     held = (len(edges) - 1) * k2 * ny * nx * 8 + 3 * run.threads * frames * ny * nx * max(itemsize, 8)
-    if grid.uniform and not plan.keep and held <= memory / 2:
+    if grid.uniform and not plan.keep and not spilled and held <= memory / 2:
         parts = [
             _delayed(slab_sums)(clone(data, seed=i)[t0:t1], slice(t0, t1), grid, cols, mean_frame, plan.batch)
             for i, (t0, t1) in enumerate(itertools.pairwise(edges))
@@ -720,13 +829,21 @@ def _add(*arrays: np.ndarray) -> np.ndarray:
     return total
 
 
+def _item(part: dict[str, Any], key: str) -> Any:
+    return part[key]
+
+
+def _without(part: dict[str, Any], key: str) -> dict[str, Any]:
+    return {k: v for k, v in part.items() if k != key}
+
+
 def _delayed(fn):
     import dask
 
     return dask.delayed(fn, pure=True)
 
 
-def _make_lines(runs, grid, snr, freq, carries, cluster, masks) -> list[Line]:
+def _make_lines(runs, grid, snr, freq, carries, cluster, masks, null) -> list[Line]:
     lines = []
     for k, (b, zmax, fap) in enumerate(runs):
         member = carries[k]
@@ -741,11 +858,24 @@ def _make_lines(runs, grid, snr, freq, carries, cluster, masks) -> list[Line]:
                 parts.append(LineCluster(k, cid, n, centroid, bbox, float(vals.mean()), float(vals.max())))
         # the line's SNR: its SNR map's largest (zmax to rounding: the map comes from the second pass)
         top = float(snr[k].max()) if snr[k].size else zmax
-        lines.append(Line(k, f, float((b + 1) * grid.df), top, fap, int(member.sum()), tuple(parts)))
+        evidence = LineEvidence(
+            frequency=f,
+            df=grid.df,
+            nyquist=grid.nyquist,
+            uniform=grid.uniform,
+            cluster_sizes=tuple(c.n_pixels for c in parts),
+            frame_median=float(null.frame_median[b - grid.lo]),
+            frame_wide=null.frame_wide(b - grid.lo),
+        )
+        kind, why = classify(evidence)
+        alias = 2.0 * grid.nyquist - f if grid.uniform else math.nan
+        line = Line(k, f, float((b + 1) * grid.df), top, fap, int(member.sum()), tuple(parts), kind, why, alias)
+        lines.append(line)
     return lines
 
 
-# (dims, units, long_name) of every variable of detection.nc; units "1": dimensionless; None: the cube's
+# (dims, units, long_name) of every variable of detection.nc; units "1": dimensionless; None: the cube's;
+# "": none (text)
 VARIABLES = {
     "peak_frequency": (("y", "x"), "Hz", "frequency of the pixel's strongest whitened periodogram peak in the band"),
     "peak_snr": (("y", "x"), "1", "whitened power at the pixel's peak (noise floor = 1)"),
@@ -767,6 +897,19 @@ VARIABLES = {
         "1",
         "false-alarm probability of the line, corrected for the frequencies and pixels searched",
     ),
+    "line_kind": (
+        ("line",),
+        None,
+        "what the line is: vibration (claimed), or frame-wide, frame-pattern, unlocated, scattered",
+    ),
+    "line_reason": (("line",), None, "why the line is not claimed as vibration (empty when it is)"),
+    "line_alias_frequency": (
+        ("line",),
+        "Hz",
+        "the line's other reading, frame rate - frequency (a vibration above Nyquist shows below it)",
+    ),
+    "band_max_snr": (("frequency",), "1", "largest whitened power over the pixels at each searched frequency"),
+    "frame_median_snr": (("frequency",), "1", "median whitened power over the pixels at each searched frequency"),
     "snr": (("line", "y", "x"), "1", "largest whitened power within one Fourier bin of the line"),
     "carries_line": (("line", "y", "x"), "1", "1 where the pixel carries the line (Benjamini-Hochberg at alpha)"),
     "cluster": (("y", "x"), "1", "cluster of pixels carrying a line: 0 none, k >= 1 cluster k (cluster_id)"),
@@ -775,7 +918,7 @@ VARIABLES = {
 }
 
 
-def _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, masks, alpha, band) -> xr.Dataset:
+def _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, masks, alpha, band, null) -> xr.Dataset:
     n_lines, n_clusters = len(lines), len(masks)
     cluster_lines = np.zeros((n_clusters, n_lines), dtype=np.int8)
     line_of_cluster = np.zeros(n_clusters, dtype=np.int32)
@@ -796,6 +939,11 @@ def _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, mas
         "line_frequency": np.array([ln.frequency for ln in lines], dtype=np.float64),
         "line_snr": np.array([ln.snr for ln in lines], dtype=np.float64),
         "line_false_alarm_probability": np.array([ln.false_alarm_probability for ln in lines], dtype=np.float64),
+        "line_kind": np.array([ln.kind for ln in lines], dtype=object),
+        "line_reason": np.array([ln.reason for ln in lines], dtype=object),
+        "line_alias_frequency": np.array([ln.alias_frequency for ln in lines], dtype=np.float64),
+        "band_max_snr": maps["band_max"],
+        "frame_median_snr": null.frame_median,
         "snr": snr,
         "carries_line": carries.astype(np.int8),
         "cluster": cluster.astype(np.int32),
@@ -805,11 +953,16 @@ def _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, mas
     units = str(cube.attrs.get("units", "1"))
     ds = xr.Dataset(
         {
-            name: (dims, values[name], {"units": u if u is not None else units, "long_name": text})
+            name: (dims, values[name], {"long_name": text} | ({"units": u or units} if u != "" else {}))
             for name, (dims, u, text) in VARIABLES.items()
         },
         coords={
             "line": ("line", np.arange(n_lines), {"units": "1", "long_name": "detected line, strongest first"}),
+            "frequency": (
+                "frequency",
+                grid.frequencies[grid.lo : grid.hi],
+                {"units": "Hz", "long_name": "searched Fourier frequency"},
+            ),
             "cluster_id": (
                 "cluster_id",
                 np.array([c for c, _ in masks], dtype=np.int32),
@@ -835,6 +988,11 @@ def _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, mas
             "uniform_time": int(grid.uniform),
             "periodogram": "rfft" if grid.uniform else "Lomb-Scargle (nifty-ls, floating mean, psd)",
             "floor_window_bins": 2 * grid.half_width + 1,
+            "empirical_null": (
+                "line and pixel p-values: the larger of the white-noise tail and the recording's own "
+                "(pooled whitened powers off the lines; the exponential tail of the per-frequency maxima)"
+            ),
+            "null_tail_threshold_scale": np.array(null.tail if null.tail else [np.nan, np.nan]),
             "row_offset": "ignored: a per-row time shift changes the phase of a periodogram, not its power",
             "source": str(cube.attrs.get("source", "")),
             "Conventions": "CF-1.8",

@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from vibinverse.errors import DataError, InputError
+from vibinverse.imaging.line_checks import VIBRATION
 
 logger = logging.getLogger(__name__)
 
@@ -472,8 +473,9 @@ def choose_bands(
 
 
 def cluster_lines(path: str | Path, cluster: int) -> list[float]:
-    """The frequencies (Hz) of the lines a detection map's cluster carries (its `cluster_lines`),
-    strongest line first; [] when the map has no lines."""
+    """The frequencies (Hz) of the vibration lines a detection map's cluster carries (its
+    `cluster_lines`, less those whose `line_kind` says they are not vibration: frame patterns,
+    frame-wide flicker...), strongest line first; [] when the map has none."""
     import xarray as xr
 
     from vibinverse.io.series import check_file
@@ -485,11 +487,12 @@ def cluster_lines(path: str | Path, cluster: int) -> list[float]:
                 return []
             carried = ds["cluster_lines"].sel(cluster_id=cluster).values
             freqs = np.asarray(ds["line_frequency"].values, dtype=float)
+            kinds = [str(k) for k in ds["line_kind"].values] if "line_kind" in ds else ["vibration"] * freqs.size
     except KeyError:
         return []
     except (OSError, ValueError) as exc:
         raise DataError(f"pixels: cannot read the detection map {p}: {str(exc).splitlines()[0]}") from None
-    return [float(f) for f, c in zip(freqs, np.asarray(carried)) if c]
+    return [float(f) for f, c, k in zip(freqs, np.asarray(carried), kinds) if c and k == VIBRATION]
 
 
 def band_gains(coef: np.ndarray, sigma: np.ndarray) -> np.ndarray:

@@ -69,7 +69,9 @@ def test_detect_writes_the_map_the_lines_and_the_plot(cube_nc, tmp_path):
     assert (row["cluster"], row["n_pixels"], row["bbox_y0"], row["bbox_y1"], row["bbox_x0"], row["bbox_x1"]) == (
         1, 24, 6, 12, 15, 19,
     )  # fmt: skip
-    assert re.search(r"line 0: 9\.\d+ Hz, SNR \d+", err) and "cluster 1 (24 px)" in err  # the log: stderr
+    assert (
+        re.search(r"line 0: 9\.\d+ Hz \(or [\d.]+ Hz if aliased\), SNR \d+", err) and "cluster 1 (24 px)" in err
+    )  # the log: stderr
     with xr.open_dataset(out / DETECTION, engine="h5netcdf") as ds:
         # the contract of `vibinverse fit CUBE --pixels DIR/detection.nc:K`: cluster == K
         assert ds["cluster"].dtype == np.int32 and ds["cluster"].dims == ("y", "x")
