@@ -16,7 +16,8 @@ import numpy as np
 
 from vibinverse.errors import DataError, Unsupported
 from vibinverse.io import jsonio
-from vibinverse.io.series import Series, check_file, netcdf_format
+from vibinverse.io.file_basics import netcdf_format
+from vibinverse.io.series import Series, check_file
 from vibinverse.priors import Prior
 
 logger = logging.getLogger(__name__)

@@ -296,7 +296,7 @@ class GainSeed:
 
 
 def _uniform(t: np.ndarray) -> bool:
-    from vibinverse.io.series import UNIFORM_RTOL
+    from vibinverse.io.file_basics import UNIFORM_RTOL
 
     step = (t[-1] - t[0]) / (t.size - 1)
     return bool(np.max(np.abs(t - (t[0] + np.arange(t.size) * step))) <= UNIFORM_RTOL * step)

@@ -25,7 +25,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from vibinverse.errors import DataError, InputError
-from vibinverse.io.series import UNIFORM_RTOL, netcdf_format
+from vibinverse.io.file_basics import UNIFORM_RTOL, netcdf_format
 from vibinverse.io.video import (
     ChannelFrames,
     FrameSource,

@@ -66,7 +66,8 @@ def test_irregular_stamps_are_accepted_and_described():
     """Jitter of +-20 % of a frame and 10 % dropped frames: not uniform, and described (median
     step, jitter as the RMS deviation from the regular grid, dropped frames) by describe() and in
     the notes; a drifting clock is a grid; uniform stamps (within UNIFORM_RTOL) get no note."""
-    from vibinverse.io.series import UNIFORM_RTOL, sampling_summary
+    from vibinverse.io.file_basics import UNIFORM_RTOL
+    from vibinverse.io.series import sampling_summary
 
     rng = np.random.default_rng(0)
     n, dt = 4000, 0.005
