@@ -85,7 +85,7 @@ from threadpoolctl import threadpool_limits
 
 from vibinverse.errors import DataError, InputError
 from vibinverse.imaging.empirical_null import Z_EDGES, EmpiricalNull, z_counts
-from vibinverse.imaging.line_checks import VIBRATION, LineEvidence, classify
+from vibinverse.imaging.line_checks import VIBRATION, LineEvidence, classify, frame_combs
 from vibinverse.imaging.scheduler import session
 from vibinverse.imaging.spill import Spill
 from vibinverse.imaging.whitening import (
@@ -844,34 +844,43 @@ def _delayed(fn):
 
 
 def _make_lines(runs, grid, snr, freq, carries, cluster, masks, null) -> list[Line]:
-    lines = []
-    for k, (b, zmax, fap) in enumerate(runs):
-        member = carries[k]
-        w = snr[k][member]
-        f = float(np.sum(w * freq[k][member]) / np.sum(w)) if w.size and np.sum(w) > 0 else (b + 1) * grid.df
-        parts = []
-        for cid, mask in masks:
-            sel = mask & member
-            if sel.any():
-                n, centroid, bbox = _region(sel)
-                vals = snr[k][sel]
-                parts.append(LineCluster(k, cid, n, centroid, bbox, float(vals.mean()), float(vals.max())))
-        # the line's SNR: its SNR map's largest (zmax to rounding: the map comes from the second pass)
-        top = float(snr[k].max()) if snr[k].size else zmax
+    lines = [_line(k, run, grid, snr, freq, carries, masks) for k, run in enumerate(runs)]
+    combs = frame_combs([ln.frequency for ln in lines], 2.0 * grid.nyquist, grid.df) if grid.uniform else []
+    out = []
+    for k, line in enumerate(lines):
+        b = runs[k][0]
         evidence = LineEvidence(
-            frequency=f,
+            frequency=line.frequency,
             df=grid.df,
             nyquist=grid.nyquist,
             uniform=grid.uniform,
-            cluster_sizes=tuple(c.n_pixels for c in parts),
+            cluster_sizes=tuple(c.n_pixels for c in line.clusters),
             frame_median=float(null.frame_median[b - grid.lo]),
             frame_wide=null.frame_wide(b - grid.lo),
+            comb_period=combs[k] if combs else None,
         )
         kind, why = classify(evidence)
-        alias = 2.0 * grid.nyquist - f if grid.uniform else math.nan
-        line = Line(k, f, float((b + 1) * grid.df), top, fap, int(member.sum()), tuple(parts), kind, why, alias)
-        lines.append(line)
-    return lines
+        alias = 2.0 * grid.nyquist - line.frequency if grid.uniform else math.nan
+        out.append(dataclasses.replace(line, kind=kind, reason=why, alias_frequency=alias))
+    return out
+
+
+def _line(k, run, grid, snr, freq, carries, masks) -> Line:
+    """Line k of the `runs` of `_lines_of`, unclassified: its frequency, SNR and clusters."""
+    b, zmax, fap = run
+    member = carries[k]
+    w = snr[k][member]
+    f = float(np.sum(w * freq[k][member]) / np.sum(w)) if w.size and np.sum(w) > 0 else (b + 1) * grid.df
+    parts = []
+    for cid, mask in masks:
+        sel = mask & member
+        if sel.any():
+            n, centroid, bbox = _region(sel)
+            vals = snr[k][sel]
+            parts.append(LineCluster(k, cid, n, centroid, bbox, float(vals.mean()), float(vals.max())))
+    # the line's SNR: its SNR map's largest (zmax to rounding: the map comes from the second pass)
+    top = float(snr[k].max()) if snr[k].size else zmax
+    return Line(k, f, float((b + 1) * grid.df), top, fap, int(member.sum()), tuple(parts))
 
 
 # (dims, units, long_name) of every variable of detection.nc; units "1": dimensionless; None: the cube's;

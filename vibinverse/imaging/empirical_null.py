@@ -20,8 +20,10 @@ larger of the white-noise false-alarm probability and one measured on the record
   1 - (1 - P)^M. (On white noise this is conservative: 1 % false alarms at a nominal 5 %; on
   pixels whose noise power varies log-normally by a factor 2, where the white-noise probability
   calls a line in every data set, it holds: 5 %; tests/vibinverse/imaging/test_empirical_null.py.)
-  With fewer than `MIN_NULL_FREQUENCIES` frequencies away from the candidates there is no such
-  sample, and the white-noise probability stands alone.
+  With fewer than `MIN_NULL_FREQUENCIES` frequencies away from the candidates (lines everywhere:
+  a codec's comb of frame-pattern harmonics, a short clip), every frequency is the null, the
+  candidates included: conservative, only lines that stand out of the others pass. With fewer
+  than that many frequencies searched at all, the white-noise probability stands alone.
 * **The frame** (is a line everywhere): the median of z over the pixels at each frequency. On
   noise it is ln 2 (the median of Exp(1)); a frequency where at least half the frame's pixels
   reach `FRAME_WIDE_MEDIAN` is a change of the whole picture (illumination, exposure, flicker,
@@ -77,11 +79,13 @@ class EmpiricalNull:
         off = np.ones(m, dtype=bool)
         for c in np.asarray(candidates, dtype=np.int64):
             off[max(0, c - NULL_GUARD_BINS) : c + NULL_GUARD_BINS + 1] = False
+        if off.sum() < MIN_NULL_FREQUENCIES:  # lines everywhere (a codec's comb, a short clip): every
+            off[:] = True  # frequency is the null, candidates included (conservative: they widen it)
         pooled = counts[off].sum(axis=0)
         n = int(pooled.sum())
         survival = np.cumsum(pooled[::-1])[::-1] / max(n, 1)
         tail = None
-        if off.sum() >= MIN_NULL_FREQUENCIES:
+        if m >= MIN_NULL_FREQUENCIES:
             top = band_max[off]
             u = float(np.median(top))
             excess = top[top > u] - u

@@ -15,13 +15,18 @@ from __future__ import annotations
 import dataclasses
 from abc import ABC, abstractmethod
 
+import numpy as np
+
 #: a line carried only by clusters this small is not a structure ("1-3 pixels scattered")
 SCATTERED_PIXELS = 3
 #: ... when there are at least this many of them (one small cluster may be a point target)
 SCATTERED_CLUSTERS = 3
-#: a line within this many Fourier bins of fs / m, m in PATTERN_PERIODS, is a pattern of frames
-PATTERN_BINS = 1.5
-PATTERN_PERIODS = (2, 3, 4)
+#: a line within this many Fourier bins of fs / m is a pattern of frames, m -> bins: half a bin (a
+#: pattern's line sits on its frequency; a short clip's bins are wide, and a vibration half a bin away
+#: stays one), 1.5 at fs / 2, which the grid's last bin (one short of Nyquist) shows a bin low
+PATTERN_BINS = {2: 1.5, 3: 0.5, 4: 0.5}
+#: a comb: at least COMB_LINES lines at multiples of fs / m, m in COMB_PERIODS, its teeth >= COMB_SPACING bins apart
+COMB_LINES, COMB_PERIODS, COMB_SPACING = 3, range(5, 33), 3
 VIBRATION = "vibration"
 
 
@@ -36,6 +41,7 @@ class LineEvidence:
     cluster_sizes: tuple[int, ...]  # pixels of each cluster that carries the line
     frame_median: float  # median whitened power over the whole frame at the line's bin
     frame_wide: bool  # at least half the frame's pixels carry power there (`EmpiricalNull.frame_wide`)
+    comb_period: int | None = None  # frames m of a comb of lines at multiples of fs / m it belongs to (`frame_combs`)
 
 
 class LineCheck(ABC):
@@ -52,8 +58,9 @@ LINE_CHECKS: dict[str, LineCheck] = {}
 
 
 def register_line_check(check: type[LineCheck]) -> type[LineCheck]:
-    """Class decorator: add a check to `LINE_CHECKS` (applied in registration order)."""
-    LINE_CHECKS[check.kind] = check()
+    """Class decorator: add a check to `LINE_CHECKS` under its `name` (default: its kind; applied in
+    registration order)."""
+    LINE_CHECKS[getattr(check, "name", check.kind)] = check()
     return check
 
 
@@ -86,10 +93,47 @@ class FramePattern(LineCheck):
         if not line.uniform:
             return None
         fs = 2.0 * line.nyquist
-        for m in PATTERN_PERIODS:
-            if abs(line.frequency - fs / m) <= PATTERN_BINS * line.df:
+        for m, bins in PATTERN_BINS.items():
+            if abs(line.frequency - fs / m) <= bins * line.df:
                 return f"at 1/{m} of the frame rate ({fs / m:.6g} Hz): a pattern of frames, not vibration"
         return None
+
+
+@register_line_check
+class FrameComb(LineCheck):
+    """Lines at several multiples of fs / m (m >= 5 frames): a pattern of frames that repeats every
+    m frames (a codec's mini-GOP, B-frame pyramid or rate control) makes a comb of harmonics."""
+
+    kind = "frame-pattern"
+    name = "frame-comb"
+
+    def reason(self, line: LineEvidence) -> str | None:
+        if line.comb_period is not None:
+            fs = 2.0 * line.nyquist
+            return (
+                f"one of >= {COMB_LINES} lines at multiples of 1/{line.comb_period} of the frame rate "
+                f"({fs / line.comb_period:.6g} Hz): a pattern of frames, not vibration"
+            )
+        return None
+
+
+def frame_combs(frequencies: list[float], fs: float, df: float) -> list[int | None]:
+    """For each line frequency (Hz), the period m (frames, COMB_PERIODS) of the first comb of lines it
+    belongs to: at least COMB_LINES lines within PATTERN_BINS[3] bins of multiples of fs / m,
+    multiples COMB_SPACING bins apart or more; None when it belongs to none."""
+    out: list[int | None] = [None] * len(frequencies)
+    f = np.asarray(frequencies, dtype=np.float64)
+    tol = PATTERN_BINS[3] * df
+    for m in COMB_PERIODS:
+        base = fs / m
+        if base < COMB_SPACING * df or f.size < COMB_LINES:
+            continue
+        j = np.round(f / base)
+        on = (j >= 1) & (np.abs(f - j * base) <= tol)
+        if on.sum() >= COMB_LINES:
+            for i in np.flatnonzero(on):
+                out[i] = out[i] if out[i] is not None else m
+    return out
 
 
 @register_line_check

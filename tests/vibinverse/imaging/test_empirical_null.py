@@ -83,6 +83,19 @@ def test_a_line_in_most_of_the_frame_is_frame_wide():
     assert null.frame_fraction[11] < 0.2  # P(Exp(1) >= 2) = 0.135
 
 
+def test_candidates_everywhere_make_the_null_of_every_frequency():
+    """A comb of lines on most frequencies leaves too few off them: the null is taken from all,
+    which the comb widens (conservative), instead of falling back to white noise."""
+    rng = np.random.default_rng(7)
+    z = rng.exponential(size=(2000, 40))
+    comb = np.arange(0, 40, 2)
+    z[:, comb] += rng.exponential(60.0, size=(2000, comb.size))
+    null = null_of(z, candidates=comb)
+    assert null.tail is not None and null.tail[0] > 50  # the threshold sits among the comb's maxima
+    white = corrected(-z.max(axis=0), 40 * 2000)
+    assert (white[comb] < 1e-3).all() and (null.line_probability(z.max(axis=0)[comb]) > 1e-3).mean() > 0.5
+
+
 def test_too_few_frequencies_give_no_tail_and_no_evidence():
     rng = np.random.default_rng(6)
     z = rng.exponential(size=(100, 10))

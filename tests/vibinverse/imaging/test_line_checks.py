@@ -2,7 +2,7 @@
 
 import dataclasses
 
-from vibinverse.imaging.line_checks import LINE_CHECKS, VIBRATION, LineEvidence, classify
+from vibinverse.imaging.line_checks import LINE_CHECKS, VIBRATION, LineEvidence, classify, frame_combs
 
 PLAIN = LineEvidence(
     frequency=32.0, df=0.28, nyquist=125.0, uniform=True, cluster_sizes=(3000, 12), frame_median=0.7, frame_wide=False
@@ -31,6 +31,9 @@ def test_frame_patterns_at_a_third_and_a_quarter_of_the_frame_rate():
         assert classify(dataclasses.replace(PLAIN, frequency=f))[0] == "frame-pattern"
     # four bins from a quarter: a fork at 64 Hz filmed at 250 fps stays vibration
     assert classify(dataclasses.replace(PLAIN, frequency=64.0))[0] == VIBRATION
+    # a short clip's wide bins: a line 0.56 bins from a quarter of the frame rate is vibration
+    short = dataclasses.replace(PLAIN, df=5.0, nyquist=250.0, frequency=127.8)
+    assert classify(short)[0] == VIBRATION
     # irregular frame times have no frame pattern
     assert classify(dataclasses.replace(PLAIN, frequency=62.5, uniform=False))[0] == VIBRATION
 
@@ -38,3 +41,14 @@ def test_frame_patterns_at_a_third_and_a_quarter_of_the_frame_rate():
 def test_one_small_cluster_may_be_a_point_target():
     assert classify(dataclasses.replace(PLAIN, cluster_sizes=(2,)))[0] == VIBRATION
     assert classify(dataclasses.replace(PLAIN, cluster_sizes=(2, 1, 40)))[0] == VIBRATION
+
+
+def test_a_comb_at_multiples_of_a_frame_period_is_a_frame_pattern():
+    """Lines at 66.7, 200, 466.7 Hz at 1000 fps: multiples of fs / 15 (a 15-frame codec pattern);
+    a line 0.93 bins off a tooth is not in it (in a 75-frame clip, 13.3 Hz bins, it would be: the
+    clip cannot tell); the fork's harmonics 32, 64, 96 at 250 fps are no such comb."""
+    assert frame_combs([466.7, 200.0, 132.4, 66.7], 1000.0, 1.0) == [15, 15, None, 15]
+    assert frame_combs([466.7, 200.0, 132.4, 66.7], 1000.0, 13.3) == [15] * 4
+    assert frame_combs([32.0, 63.9, 95.96, 124.7], 250.0, 0.28) == [None] * 4
+    comb = dataclasses.replace(PLAIN, comb_period=15, nyquist=500.0)
+    assert classify(comb)[0] == "frame-pattern"
