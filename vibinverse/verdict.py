@@ -25,6 +25,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from vibinverse.stationarity import describe_change
+
 RHAT_MAX = 1.01  # rank-normalized split R-hat (Vehtari et al. 2021), the sampler's own stopping rule
 ESS_MIN = 400.0  # bulk and tail ESS
 
@@ -302,6 +304,10 @@ def trust(summary: dict, lines: list[VerdictLine] | None = None) -> tuple[bool |
             passed.append((f"residuals white ({lb}) and Gaussian ({np_})", "residuals white"))
         elif white is not False and normal is not False:
             unknown.append(("the residual checks are incomplete", "residuals not fully checked"))
+    changes = d.get("line_stationarity")
+    for label, entry in (changes if isinstance(changes, dict) else {}).items():
+        if isinstance(entry, dict) and entry.get("stationary") is False:
+            failed.append((describe_change(label, entry), f"{label.replace('_', ' ')} not stationary"))
     multimodal = d.get("multimodal")
     for n in multimodal if isinstance(multimodal, list) else []:
         failed.append((f"{n} is multimodal: the summary mixes separate modes", f"{n} multimodal"))

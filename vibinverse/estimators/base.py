@@ -25,6 +25,7 @@ from vibinverse.io.series import FEW_CYCLES, Series
 from vibinverse.models.base import intensity_units
 from vibinverse.posterior import Posterior
 from vibinverse.result import FitResult
+from vibinverse.stationarity import line_stationarity
 
 logger = logging.getLogger(__name__)
 
@@ -105,6 +106,13 @@ def complete(result: FitResult, posterior: Posterior) -> FitResult:
     else:
         result.predictive["residual"] = residual
         result.diagnostics["residual_checks"] = residual_checks(residual)
+    lines = {
+        t.label: result.point[t.frequency]
+        for t in model.line_tests(result.point, posterior.space.names)
+        if t.deterministic and t.frequency is not None and t.frequency in result.point
+    }
+    if lines:
+        result.diagnostics["line_stationarity"] = line_stationarity(series.time, series.intensity, lines)
     chains = (
         result.chains
         if result.chains is not None

@@ -30,11 +30,13 @@ if TYPE_CHECKING:
 class LineTest:
     """One line the fit claims: `label` names it in the summary (`{label}_detected`, ...), `null`
     are the values that remove it from the model (an amplitude set to 0), and `frequency` is the
-    name of its frequency when that is free (the look-elsewhere effect), else None."""
+    name of its frequency when that is free (the look-elsewhere effect), else None; `deterministic`
+    marks a line of fixed amplitude (`vibinverse.stationarity` checks it)."""
 
     label: str
     null: dict[str, float]
     frequency: str | None
+    deterministic: bool = False  # a line of fixed amplitude (not a noise-driven resonance): its stationarity is checked
 
 
 class SignalModel(ABC):

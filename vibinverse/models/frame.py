@@ -482,12 +482,12 @@ class FrameModel(SignalModel):
         """The drive line (its amplitude to 0) and the tilt resonance (the base noise to 0)."""
         k = self.key
         out = []
-        for label, name, freq in (
-            ("drive", "drive_amplitude", "drive_frequency"),
-            ("resonance", "noise_rms", "tilt_frequency"),
+        for label, name, freq, deterministic in (
+            ("drive", "drive_amplitude", "drive_frequency", True),
+            ("resonance", "noise_rms", "tilt_frequency", False),
         ):
             if k + name in values:
-                out.append(LineTest(label, {k + name: 0.0}, k + freq))
+                out.append(LineTest(label, {k + name: 0.0}, k + freq, deterministic))
         return out
 
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:

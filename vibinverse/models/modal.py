@@ -896,7 +896,7 @@ class ModalModel(SignalModel):
         out = []
         for j in range(self.spec.lines):
             f = f"lines[{j}].frequency"
-            out.append(LineTest(f"line_{j}", {f"lines[{j}].amplitude": 0.0}, f if f in free else None))
+            out.append(LineTest(f"line_{j}", {f"lines[{j}].amplitude": 0.0}, f if f in free else None, True))
         for i in range(self.spec.modes):
             f = f"modes[{i}].frequency"
             out.append(LineTest(f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None))

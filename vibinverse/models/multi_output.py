@@ -385,7 +385,7 @@ class MultiOutputModel(SignalModel):
             i = self.index[j]
             if kind == "line":
                 f = f"lines[{i}].frequency"
-                out.append(LineTest(f"line_{i}", {f"lines[{i}].amplitude": 0.0}, f if f in free else None))
+                out.append(LineTest(f"line_{i}", {f"lines[{i}].amplitude": 0.0}, f if f in free else None, True))
             else:
                 f = f"modes[{i}].frequency"
                 out.append(LineTest(f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None))
