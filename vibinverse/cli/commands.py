@@ -501,20 +501,53 @@ def _bench_imaging(quick: bool) -> tuple[dict, Any]:
     return result, lambda p: plot(result, p)
 
 
+def _bench_realdata(args: argparse.Namespace, out: Path, js: Path) -> dict[str, Any]:
+    """--realdata: our tool on the measured recordings of the real-data corpus, each case run as a
+    user would and scored against its independent reference (`vibinverse.bench.realdata_bench`);
+    realdata.json (every claim), realdata.txt (the table), realdata.png."""
+    from vibinverse.bench.realdata_bench import plot, run, table
+    from vibinverse.bench.realdata_cases import load_cases, select
+
+    cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases is not None else None
+    select(load_cases(), cases)  # the corpus and the case names, checked before anything is written
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers: {args.workers}; allowed: 1 or more")
+    txt, png = out / "realdata.txt", out / "realdata.png"
+    _check_outputs({js.name: js, txt.name: txt, png.name: png}, {})
+    with created(out):
+        result = run(quick=args.quick, cases=cases, workers=args.workers)
+        text = table(result)
+        logger.info(text)
+        write_all(
+            {
+                js: lambda p: p.write_text(jsonio.dumps(result, indent=2)),
+                txt: lambda p: p.write_text(text + "\n"),
+                png: lambda p: plot(result, p),
+            }
+        )
+    logger.info(f"wrote {js}, {txt} and {png}")
+    return _result(result, [js, txt, png])
+
+
 #: `vibinverse bench` modes: the flag that picks one (None: the default), its file stem, its runner
 BENCH_MODES: dict[str | None, tuple[str, Any]] = {
     None: ("bench", _bench_forward),
     "estimators": ("estimators", _bench_estimators),
     "robustness": ("robustness", _bench_robustness),
     "imaging": ("imaging", _bench_imaging),
+    "realdata": ("realdata", None),  # writes its own files: BENCH_WITH_ARGS
 }
+
+#: modes that take the parsed options and write their own files: (args, output dir, JSON path) -> result
+BENCH_WITH_ARGS: dict[str, Any] = {"realdata": _bench_realdata}
 
 
 def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
     mode = next((m for m in BENCH_MODES if m is not None and getattr(args, m)), None)
+    with_cases = args.scene or mode in BENCH_WITH_ARGS  # --cases and --workers: --robustness --scene, --realdata
     scene_only = {"--workers": args.workers is not None, "--cases": args.cases is not None}
-    if not args.scene and any(scene_only.values()):
-        raise InputError(f"{next(k for k, v in scene_only.items() if v)}: only with --robustness --scene")
+    if not with_cases and any(scene_only.values()):
+        raise InputError(f"{next(k for k, v in scene_only.items() if v)}: only with --robustness --scene or --realdata")
     if args.scene and mode != "robustness":
         raise InputError("--scene: the scene column of the robustness bench; give --robustness --scene")
     stem, runner = BENCH_MODES[mode]
@@ -522,6 +555,8 @@ def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
     js, png = out / f"{stem}.json", out / f"{stem}.png"
     if args.scene:
         return _bench_robustness_scene(args, out, js)
+    if mode in BENCH_WITH_ARGS:
+        return BENCH_WITH_ARGS[mode](args, out, js)
     _check_outputs({js.name: js, png.name: png}, {})
     with created(out):
         result, plotter = runner(args.quick)
@@ -645,15 +680,28 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fit.add_argument(
         "data",
-        help="series: CSV/TSV (delimiter sniffed; columns time,intensity), Parquet, .npy, .npz or netCDF; NaN = gap; "
-        "with --pixels an image cube or video",
-    )
-    fit.add_argument("--time-column", metavar="NAME", help="time column of a CSV/TSV or Parquet table (default: time)")
-    fit.add_argument(
-        "--value-column", metavar="NAME", help="value column of a CSV/TSV or Parquet table (default: intensity)"
+        help="series: CSV/TSV (delimiter sniffed; columns time,intensity), Parquet, .npy, .npz (arrays time,intensity, "
+        "or named arrays), netCDF, or a LabVIEW Measurement file (.lvm, or any text file starting 'LabVIEW "
+        "Measurement'); NaN = gap; with --pixels an image cube or video",
     )
     fit.add_argument(
-        "--fs", type=float, metavar="HZ", help="sampling rate of a table without a time column: time = arange(n) / fs"
+        "--time-column",
+        metavar="NAME",
+        help="time column of a CSV/TSV or Parquet table, or time array of an .npz (default: time); an lvm file's "
+        "time is its X_Value column",
+    )
+    fit.add_argument(
+        "--value-column",
+        metavar="NAME",
+        help="value column of a CSV/TSV or Parquet table (default: intensity); the channel of an lvm file, or the "
+        "array or named column of an .npz (a name, or a 0-based index), needed when the file holds several",
+    )
+    fit.add_argument(
+        "--fs",
+        type=float,
+        metavar="HZ",
+        help="sampling rate of a table without a time column, an .npz without time or rate, or an lvm file without "
+        "X_Value columns: time = arange(n) / fs",
     )
     fit.add_argument(
         "--scene",
@@ -765,7 +813,8 @@ def build_parser() -> argparse.ArgumentParser:
         "bench",
         "bench.json, bench.png (with --estimators: estimators.json, estimators.png; "
         "with --robustness: robustness.json, robustness.png, with --scene robustness.json, robustness_scene.txt, "
-        "robustness_scene_fits.jsonl; with --imaging: imaging.json, imaging.png)",
+        "robustness_scene_fits.jsonl; with --imaging: imaging.json, imaging.png; with --realdata: realdata.json, "
+        "realdata.txt, realdata.png)",
     )
     which = bench.add_mutually_exclusive_group()
     which.add_argument(
@@ -786,6 +835,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="instead: the imager (64 x 64 px x 4000 frames), detection throughput against a numpy rfft and its "
         "peak memory, the multi-pixel fit's cost and sd against the number of pixels (~2 min, --quick ~1 min)",
     )
+    which.add_argument(
+        "--realdata",
+        action="store_true",
+        help="instead: the real recordings of the corpus ($VIBINVERSE_REALDATA, default ../shared/realdata-dev: "
+        "tuning-fork videos, LIGO lines, shaker tones, a plate sweep, a slab, a footbridge), each run as a user would "
+        "and scored against its independent reference; every fit in its own process with a limit of 300 s "
+        "(--quick: 60 s, the 250 fps videos and one file per series case, ~5 min)",
+    )
     bench.add_argument(
         "--scene",
         action="store_true",
@@ -795,10 +852,15 @@ def build_parser() -> argparse.ArgumentParser:
         "robustness_scene_fits.jsonl (50 data sets a case: hours; --quick: 1 data set of 4 fast cases, ~2 min)",
     )
     bench.add_argument(
-        "--cases", metavar="A,B", help="with --robustness --scene: these cases only, in this order (default: all)"
+        "--cases",
+        metavar="A,B",
+        help="with --robustness --scene or --realdata: these cases only, in this order (default: all)",
     )
     bench.add_argument(
-        "--workers", type=int, metavar="N", help="with --robustness --scene: processes (default: min(2, cores))"
+        "--workers",
+        type=int,
+        metavar="N",
+        help="with --robustness --scene or --realdata: processes (default: min(2, cores))",
     )
     bench.set_defaults(func=cmd_bench)
 
