@@ -119,9 +119,10 @@ print(json.dumps({"peak_bytes": peak, "seconds": seconds, "lines": [line.frequen
 """
 
 
-def _child(path: Path, workers: int) -> dict[str, Any]:
+def _child(script: str, *args: Any) -> dict[str, Any]:
+    """The JSON document a fresh Python process running `script` with `args` prints last."""
     out = subprocess.run(
-        [sys.executable, "-c", _CHILD, str(path), str(workers)],
+        [sys.executable, "-c", script, *(str(a) for a in args)],
         capture_output=True,
         text=True,
         check=True,
@@ -140,7 +141,7 @@ def detection_row(cube: Any, table: dict, workdir: Path, workers: int = 2) -> di
     limit = _rfft_seconds(cube.intensity)
     # a fresh process: the interpreter and the modules, then the detection timed (opening and reading
     # the file included); then again, the peak of the memory its arrays held at once (tracemalloc)
-    run = _child(path, workers)
+    run = _child(_CHILD, path, workers)
     size_mb = cube.intensity.nbytes / 2**20
     above_mb = run["peak_bytes"] / 2**20
     row = {
@@ -168,16 +169,24 @@ def detection_row(cube: Any, table: dict, workdir: Path, workers: int = 2) -> di
 
 
 # a fresh process: the imports, its resident memory then (the baseline), the detection at the default
-# --memory budget timed, and the process's peak resident memory (ru_maxrss: KiB on Linux)
+# --memory budget timed, and the process's peak resident memory
 _REAL_CHILD = """
 import json, resource, sys, time
+
+def rss(field):  # bytes: VmRSS now, VmHWM the peak (Linux: reset at exec, unlike ru_maxrss, which keeps
+    try:         # the forking parent's)
+        with open("/proc/self/status") as fh:
+            return next(int(x.split()[1]) * 1024 for x in fh if x.startswith(field + ":"))
+    except OSError:
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
 from vibinverse.io.cube import open_cube
 from vibinverse.imaging.detection_map import DEFAULT_MEMORY, detection_map
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+base = rss("VmRSS")
 t0 = time.perf_counter()
 found = detection_map(open_cube(sys.argv[1], fps=float(sys.argv[2])), workers=2)
 seconds = time.perf_counter() - t0
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+peak = rss("VmHWM")
 print(json.dumps({"seconds": seconds, "peak_bytes": peak, "base_bytes": base, "budget_bytes": DEFAULT_MEMORY,
                   "claimed": [ln.frequency for ln in found.lines if ln.claimed], "lines": len(found.lines)}))
 """
@@ -196,14 +205,7 @@ def real_video_row(quick: bool) -> dict[str, Any]:
         return {"skipped": str(exc)}
     if not path.is_file():
         return {"skipped": f"{path} is not in the corpus"}
-    out = subprocess.run(
-        [sys.executable, "-c", _REAL_CHILD, str(path), str(fps)],
-        capture_output=True,
-        text=True,
-        check=True,
-        env={**os.environ, "PYTHONWARNINGS": "ignore"},
-    )
-    run = json.loads(out.stdout.strip().splitlines()[-1])
+    run = _child(_REAL_CHILD, path, fps)
     above = run["peak_bytes"] - run["base_bytes"]
     row = {
         "video": rel,

@@ -44,6 +44,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from vibinverse.bench.realdata_cases import SERIES, VIDEO, Case, CaseFile, Reference, SeriesInput, load_cases, select
+from vibinverse.imaging.line_checks import VIBRATION
 
 LOG = logging.getLogger(__name__)
 
@@ -52,7 +53,6 @@ QUICK_LIMIT_S = 60.0
 DETECT_LIMIT_FACTOR = 3.0  # a detection map's limit, in fit limits
 HARMONICS = tuple(range(2, 9))  # k f explains a claim, k = 2..8
 EXPLAIN_BINS = 2.0  # a claim is explained within max(tolerance, 2 Fourier bins)
-VIBRATION = "vibration"  # a detection line's kind when it is claimed as a vibration
 FIT_METHOD_CUBE = "map"  # the README's video walk-through: `fit CUBE --pixels detection.nc:K --method map`
 
 
@@ -232,21 +232,19 @@ def claims_from_summary(summary: dict[str, Any], stage: str = "fit") -> list[Cla
 
 
 def claims_from_lines(lines: Sequence[Any]) -> list[Claim]:
-    """A detection map's lines: claimed when their kind is "vibration" (lines without a kind are)."""
+    """A detection map's lines (`detection_map.Line`): claimed when `Line.claimed`."""
     out = []
     for line in lines:
-        kind = getattr(line, "kind", VIBRATION)
-        alias = getattr(line, "alias_frequency", math.nan)
-        note = getattr(line, "reason", "")
-        if alias is not None and math.isfinite(alias):
+        alias, note = line.alias_frequency, line.reason
+        if math.isfinite(alias):
             note = f"{note}; other reading {alias:.4g} Hz".lstrip("; ")
         out.append(
             Claim(
                 frequency=float(line.frequency),
                 stage="detect",
                 what=f"line {line.index} (SNR {line.snr:.3g}, {line.n_pixels} px)",
-                claimed=kind == VIBRATION,
-                kind=kind,
+                claimed=line.claimed,
+                kind=line.kind,
                 note=note,
             )
         )
@@ -264,7 +262,7 @@ def detect_video(path: str, fps: float) -> dict[str, Any]:
     n = int(cube.sizes["time"])
     found = detection_map(cube, workers=1)
     claims = claims_from_lines(found.lines)
-    claimed = [line for line in found.lines if getattr(line, "kind", VIBRATION) == VIBRATION]
+    claimed = [line for line in found.lines if line.claimed]
     mask, cluster, pixels = None, None, 0
     if claimed:
         strongest = max(claimed, key=lambda line: line.snr)

@@ -734,7 +734,7 @@ def detection_map(
         width = min(grid.hi, b + LINE_BINS + 1) - max(grid.lo, b - LINE_BINS)
         carries[k] = _benjamini_hochberg(corrected(_log_p(snr[k], grid, null), width), float(alpha))
     cluster, masks = _clusters(snr, carries)
-    lines = _make_lines(runs, grid, snr, freq, carries, cluster, masks, null)
+    lines = _make_lines(runs, grid, snr, freq, carries, masks, null)
     ds = _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, masks, float(alpha), band, null)
     logger.info(
         f"detect: {n_pixels} pixels x {grid.n_searched} frequencies ({grid.frequencies[grid.lo]:.4g} to "
@@ -843,7 +843,7 @@ def _delayed(fn):
     return dask.delayed(fn, pure=True)
 
 
-def _make_lines(runs, grid, snr, freq, carries, cluster, masks, null) -> list[Line]:
+def _make_lines(runs, grid, snr, freq, carries, masks, null) -> list[Line]:
     lines = [_line(k, run, grid, snr, freq, carries, masks) for k, run in enumerate(runs)]
     combs = frame_combs([ln.frequency for ln in lines], 2.0 * grid.nyquist, grid.df) if grid.uniform else []
     out = []

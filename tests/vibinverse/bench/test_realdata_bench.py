@@ -191,14 +191,12 @@ def test_a_modal_summary_gives_claims_with_intervals_and_detection():
     ]
 
 
-def test_detection_lines_are_claimed_by_kind_with_or_without_the_attribute():
-    class Plain:
-        index, frequency, snr, n_pixels = 0, 32.0, 100.0, 50
+def test_detection_lines_are_claimed_by_their_kind():
+    from vibinverse.imaging.detection_map import Line
 
-    class Scattered(Plain):
-        kind, reason, alias_frequency = "scattered", "3 pixels", 218.0
-
-    claims = rb.claims_from_lines([Plain(), Scattered()])
+    plain = Line(0, 32.0, 32.0, 100.0, 1e-9, 50, (), alias_frequency=218.0)
+    scattered = Line(1, 32.0, 32.0, 100.0, 1e-9, 3, (), kind="scattered", reason="3 pixels", alias_frequency=218.0)
+    claims = rb.claims_from_lines([plain, scattered])
     assert [c.claimed for c in claims] == [True, False]
     assert claims[1].kind == "scattered" and "218" in claims[1].note
 
