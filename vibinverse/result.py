@@ -6,7 +6,6 @@ from __future__ import annotations
 import logging
 import math
 import re
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -154,14 +153,11 @@ class FitResult:
         cached = getattr(self, "_convergence", None)
         if cached is not None and cached[0] is self.chains:
             return cached[1]
-        import arviz as az
+        from vibinverse.inference_data import rank_diagnostics
 
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            ds = az.convert_to_dataset({f"p{j}": self.chains[..., j] for j in range(len(self.names))})
-            rhat, bulk, tail = az.rhat(ds, method="rank"), az.ess(ds, method="bulk"), az.ess(ds, method="tail")
+        rhat, bulk, tail = rank_diagnostics(self.chains)
         out = {
-            n: {"rhat": float(rhat[f"p{j}"]), "ess_bulk": float(bulk[f"p{j}"]), "ess_tail": float(tail[f"p{j}"])}
+            n: {"rhat": float(rhat[j]), "ess_bulk": float(bulk[j]), "ess_tail": float(tail[j])}
             for j, n in enumerate(self.names)
         }
         self._convergence = (self.chains, out)
@@ -181,7 +177,8 @@ class FitResult:
         return max(m - 1.645 * s, lo), min(m + 1.645 * s, hi)
 
     def to_inference_data(self) -> Any:
-        """ArviZ InferenceData with CF-style `units` and `long_name` on every variable:
+        """ArviZ inference data (InferenceData on ArviZ 0.x, an xarray DataTree on 1.x; see
+        `vibinverse.inference_data`) with CF-style `units` and `long_name` on every variable:
 
         - `posterior`: real posterior draws only (chain = walker, draw); the draws of an
           approximation (Laplace) go to `approximate_posterior` instead, labelled;
@@ -193,8 +190,9 @@ class FitResult:
         - the JSON summary in the observed data's attributes (strict JSON: a non-finite number is
           null there, named in its "non_finite" record; `read_result` restores it).
         """
-        import arviz as az
         import xarray as xr
+
+        from vibinverse.inference_data import build
 
         series = self.series
         names = [_safe(n) for n in self.names]
@@ -249,16 +247,13 @@ class FitResult:
             long_name, u = long_names.get(k, (k, intensity_units))
             constant[k] = ("time_index", v, _cf(u, long_name))
         groups["constant_data"] = xr.Dataset(constant, coords=sample)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return az.InferenceData(**groups)
+        return build(groups)
 
     def to_netcdf(self, path: str | Path) -> Path:
         """Write `to_inference_data()` as netCDF (h5netcdf); opens with `arviz.from_netcdf`."""
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            self.to_inference_data().to_netcdf(str(path), engine="h5netcdf")
-        return Path(path)
+        from vibinverse.inference_data import to_netcdf
+
+        return to_netcdf(self.to_inference_data(), path)
 
 
 def detections(diagnostics: dict[str, Any]) -> list[Detection]:
@@ -287,19 +282,18 @@ def read_result(path: str | Path) -> tuple[dict[str, Any], Any]:
     (no summary, a summary that is not the one `FitResult.summary` writes, no data) raises
     DataError with one line naming the file and what is wrong.
     """
-    import arviz as az
+    from vibinverse.inference_data import from_netcdf, group, group_names
 
     p = check_file(path, "result")
     if netcdf_format(p, "result") != "hdf5":
         raise DataError(f"result: {p} is a netCDF-3 file, not a vibinverse result (those are netCDF-4/HDF5)")
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            idata = az.from_netcdf(str(p), engine="h5netcdf")
+        idata = from_netcdf(p)
     except (OSError, ValueError, KeyError, TypeError, AttributeError, RuntimeError) as exc:
         raise DataError(f"result: {p} is truncated or corrupt ({_hdf5_reason(exc)})") from None
-    groups = set(idata.groups())
-    attrs = idata.observed_data.attrs if "observed_data" in groups else {}
+    groups = set(group_names(idata))
+    observed, constant, posterior = (group(idata, g) for g in ("observed_data", "constant_data", "posterior"))
+    attrs = observed.attrs if observed is not None else {}
     if "vibinverse_summary" not in attrs:
         raise DataError(
             f"result: {p} is not a vibinverse result (it has no observed_data group with a vibinverse_summary "
@@ -307,19 +301,19 @@ def read_result(path: str | Path) -> tuple[dict[str, Any], Any]:
         )
     summary = _parse(attrs["vibinverse_summary"], p, "vibinverse_summary")
     _check_summary(summary, p)
-    for group, var in (("observed_data", "intensity"), ("constant_data", "time")):
-        if group not in groups or var not in idata[group]:
-            raise DataError(f"result: {p} is not a complete vibinverse result (no {group} group with the {var})")
-    n = idata.observed_data["intensity"].size
-    if idata.observed_data["intensity"].ndim != 1 or idata.constant_data["time"].shape != (n,):
+    for name, ds, var in (("observed_data", observed, "intensity"), ("constant_data", constant, "time")):
+        if ds is None or var not in ds:
+            raise DataError(f"result: {p} is not a complete vibinverse result (no {name} group with the {var})")
+    n = observed["intensity"].size
+    if observed["intensity"].ndim != 1 or constant["time"].shape != (n,):
         raise DataError(f"result: {p}: the observed intensity and the constant_data time are not 1-D of equal length")
-    if "posterior" in groups:
+    if posterior is not None:
         names = _parse(attrs.get("parameter_names", "{}"), p, "parameter_names")
         if not isinstance(names, dict):
             raise DataError(f"result: {p}: attribute parameter_names is not a JSON object")
         inv = {v: k for k, v in names.items() if isinstance(v, str)}
         for name in summary["parameters"]:
-            if inv.get(name) not in idata.posterior.data_vars:
+            if inv.get(name) not in posterior.data_vars:
                 raise DataError(f"result: {p}: parameter {name!r} has no variable in the posterior group")
     return summary, idata
 

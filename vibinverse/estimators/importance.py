@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import logging
 import math
-import warnings
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -38,6 +37,7 @@ import numpy as np
 from vibinverse.errors import Unsupported
 from vibinverse.estimators.base import Estimator, base_result, register_estimator
 from vibinverse.estimators.mcmc import ESS_MIN, split_laplace
+from vibinverse.inference_data import psislw
 from vibinverse.posterior import Posterior
 from vibinverse.result import FitResult
 
@@ -50,15 +50,13 @@ KHAT_MAX = 0.7
 MAX_DRAWS_FACTOR = 2
 
 
-def psis_weights(az: Any, log_w: np.ndarray) -> tuple[float, np.ndarray, float]:
+def psis_weights(log_w: np.ndarray) -> tuple[float, np.ndarray, float]:
     """(Pareto k, normalized smoothed weights, their effective number 1 / sum w^2) of log weights
     (non-finite ones count as 0); k is inf when no weight is finite."""
     if not np.any(np.isfinite(log_w)):
         raise Unsupported("no draw of the Laplace approximation has a finite posterior")
     log_w = np.where(np.isfinite(log_w), log_w, -np.inf)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        smoothed, khat = az.psislw(log_w - np.max(log_w))
+    smoothed, khat = psislw(log_w - np.max(log_w))
     weights = np.exp(smoothed - np.max(smoothed))
     weights /= weights.sum()
     return float(khat), weights, float(1.0 / np.sum(weights**2))
@@ -99,8 +97,6 @@ class LaplaceImportance(Estimator):
     ) -> FitResult:
         if start is None or start.z is None or start.cov_z is None or not np.all(np.isfinite(start.cov_z)):
             raise Unsupported("importance sampling needs a MAP with its Laplace covariance")
-        import arviz as az
-
         try:
             proposal = split_laplace(lambda zs: log_posteriors(posterior, zs, workers), start.z, start.cov_z)
         except np.linalg.LinAlgError as exc:
@@ -110,7 +106,7 @@ class LaplaceImportance(Estimator):
         rng = np.random.default_rng(seed)
         zs = proposal.draw(draws, rng)
         log_w = log_posteriors(posterior, zs, workers) - proposal.log_density(zs)
-        khat, weights, ess = psis_weights(az, log_w)
+        khat, weights, ess = psis_weights(log_w)
         cap = MAX_DRAWS_FACTOR * draws
         if khat < KHAT_MAX and ess < ESS_MIN and ess > 0 and ESS_MIN / ess * zs.shape[0] <= cap:
             # trustworthy weights, too few of them: the effective fraction ess / n is the proposal's,
@@ -120,7 +116,7 @@ class LaplaceImportance(Estimator):
             zs = np.concatenate([zs, extra])
             log_w = np.concatenate([log_w, log_posteriors(posterior, extra, workers) - proposal.log_density(extra)])
             logger.info("importance sampling: %.0f effective draws of %d, %d more drawn", ess, draws, more)
-            khat, weights, ess = psis_weights(az, log_w)
+            khat, weights, ess = psis_weights(log_w)
         if not khat < KHAT_MAX or not ess >= ESS_MIN:
             raise Unsupported(
                 f"the Laplace approximation fails its importance check (Pareto k {khat:.2f}, needs < {KHAT_MAX}; "

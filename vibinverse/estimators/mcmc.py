@@ -12,7 +12,6 @@ import logging
 import math
 import signal
 import time
-import warnings
 from collections.abc import Callable
 from contextlib import contextmanager
 from multiprocessing import get_context
@@ -442,14 +441,10 @@ def burn_in(n_steps: int, tau: np.ndarray) -> int:
 
 def rank_diagnostics(chains: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rank-normalized split R-hat, bulk ESS and tail ESS per parameter of (chain, draw, parameter)
-    draws, as `arviz.summary` computes them."""
-    import arviz as az
+    draws, as `arviz.summary` computes them (`vibinverse.inference_data`, either ArviZ major)."""
+    from vibinverse.inference_data import rank_diagnostics as diagnostics
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        ds = az.convert_to_dataset({f"p{j}": chains[..., j] for j in range(chains.shape[-1])})
-        out = [az.rhat(ds, method="rank"), az.ess(ds, method="bulk"), az.ess(ds, method="tail")]
-    return tuple(np.array([float(d[f"p{j}"]) for j in range(chains.shape[-1])]) for d in out)
+    return diagnostics(chains)
 
 
 class Convergence:
