@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from vibinverse import inference_data
 from vibinverse.io import jsonio
 from vibinverse.io.atomic import write_all
 from vibinverse.result import detections, read_result
@@ -318,16 +319,17 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
 
 def _real_draws(summary: dict, idata: Any) -> bool:
     """Whether the result has real posterior draws (a `posterior` group and no approximation)."""
-    return "posterior" in idata.groups() and approximation(summary) is None
+    return "posterior" in inference_data.group_names(idata) and approximation(summary) is None
 
 
 def _draws(idata: Any, group: str, safe: dict, names: list[str]) -> np.ndarray | None:
     """(draw, parameter) of `group` (posterior or approximate_posterior), or None."""
-    if group not in idata.groups():
+    ds = inference_data.group(idata, group)
+    if ds is None:
         return None
     inv = {v: k for k, v in safe.items()}
     try:
-        return np.stack([idata[group][inv[n]].values.reshape(-1) for n in names], axis=1)
+        return np.stack([ds[inv[n]].values.reshape(-1) for n in names], axis=1)
     except KeyError:
         return None
 
@@ -335,31 +337,23 @@ def _draws(idata: Any, group: str, safe: dict, names: list[str]) -> np.ndarray |
 def convergence_table(idata: Any, safe: dict, names: list[str]) -> dict[str, dict[str, float]]:
     """Per parameter r_hat, ess_bulk, ess_tail of `arviz.summary` on the posterior group
     (rank-normalized split R-hat, chain = walker); {} without one."""
-    if "posterior" not in idata.groups():
+    posterior = inference_data.group(idata, "posterior")
+    if posterior is None:
         return {}
-    import arviz as az
-
     inv = {v: k for k, v in safe.items()}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        table = az.summary(idata.posterior, kind="diagnostics", round_to="none")
-    out = {}
-    for n in names:
-        key = inv.get(n)
-        if key in table.index:
-            row = table.loc[key]
-            out[n] = {k: float(row[k]) for k in ("r_hat", "ess_bulk", "ess_tail")}
-    return out
+    table = inference_data.summary(posterior)
+    return {n: table[inv[n]] for n in names if inv.get(n) in table}
 
 
 def _replicates(idata: Any, n: int) -> tuple[np.ndarray | None, str | None]:
     """(replicate series (draw, sample), the approximation they come from or None)."""
-    if "posterior_predictive" not in idata.groups() or "intensity" not in idata.posterior_predictive:
+    pp = inference_data.group(idata, "posterior_predictive")
+    if pp is None or "intensity" not in pp:
         return None, None
-    v = idata.posterior_predictive["intensity"]
+    v = pp["intensity"]
     if v.shape[-1] != n or v.size == 0:
         return None, None
-    a = v.attrs.get("approximation") or idata.posterior_predictive.attrs.get("approximation")
+    a = v.attrs.get("approximation") or pp.attrs.get("approximation")
     return np.asarray(v.values, dtype=float).reshape(-1, n), (str(a) if a else None)
 
 
@@ -376,13 +370,11 @@ def _figures(summary: dict, idata: Any, v: Verdict, names: list[str], safe: dict
     """(title, PNG data URI, caption) of every figure, in the page's order."""
     import matplotlib.pyplot as plt
 
-    t = np.asarray(idata.constant_data["time"].values, dtype=float)
-    y = np.asarray(idata.observed_data["intensity"].values, dtype=float)
-    cd = idata.constant_data
+    cd, obs = inference_data.group(idata, "constant_data"), inference_data.group(idata, "observed_data")
+    t = np.asarray(cd["time"].values, dtype=float)
+    y = np.asarray(obs["intensity"].values, dtype=float)
     n = y.size
-    units = readable_units(
-        idata.observed_data["intensity"].attrs.get("units") or summary["data"].get("intensity_units")
-    )
+    units = readable_units(obs["intensity"].attrs.get("units") or summary["data"].get("intensity_units"))
     t_units = str(cd["time"].attrs.get("units") or summary["data"].get("time_units") or "s")
     ylab = _label(f"intensity ({units})")
     tlab = _label(f"time ({t_units})")
@@ -521,11 +513,12 @@ def _figures(summary: dict, idata: Any, v: Verdict, names: list[str], safe: dict
     if _real_draws(summary, idata):
         labels = _parameter_labels(summary, names)
         inv = {val: k for k, val in safe.items()}
+        posterior = inference_data.group(idata, "posterior")
         fig, axes = plt.subplots(
             len(names), 1, figsize=(9, 1.4 * len(names) + 0.6), sharex=True, constrained_layout=True
         )
         for ax, nm, lab in zip(np.atleast_1d(axes), names, labels):
-            ax.plot(idata.posterior[inv[nm]].values.T, lw=0.3, alpha=0.6)
+            ax.plot(posterior[inv[nm]].values.T, lw=0.3, alpha=0.6)
             ax.set_ylabel(lab, fontsize=7)
         np.atleast_1d(axes)[-1].set_xlabel("draw (after burn-in)")
         figs.append(("Traces", _png(fig), "Every walker's draws of every parameter: stationary, overlapping chains."))
@@ -607,6 +600,13 @@ def pixels_figure(summary: dict, where: Path) -> tuple[str, str, str] | None:
         gain_map[ys, xs] = g
         maps.append(gain_map)
     mask = np.isfinite(maps[0])
+    # the gain panels show the fitted pixels' bounding box with a margin, not the whole frame (a
+    # cluster of a few pixels in a large frame would be a speck in an empty panel); neither side
+    # under a third of the other (a row of pixels stays a readable strip)
+    edges = np.array([[ys.min(), ys.max()], [xs.min(), xs.max()]], dtype=float) + [-0.5, 0.5]
+    span = edges[:, 1] - edges[:, 0]
+    half = np.maximum(span / 2 + np.maximum(1.0, np.ceil(0.1 * span)), span.max() / 6)
+    box = np.stack([edges.mean(axis=1) - half, edges.mean(axis=1) + half], axis=1)
     first = 1 if detection is not None else 0
     panels = first + len(maps)
     fig, axes = plt.subplots(1, panels, figsize=(4.6 * panels + 0.8, 4.2), constrained_layout=True, squeeze=False)
@@ -614,6 +614,9 @@ def pixels_figure(summary: dict, where: Path) -> tuple[str, str, str] | None:
         ax = axes[0, 0]
         im = ax.imshow(detection["peak_snr"], cmap="inferno", origin="upper")
         ax.contour(mask.astype(float), levels=[0.5], colors="cyan", linewidths=1.0)
+        if np.any(box[:, 1] - box[:, 0] < np.array(shape) - 1):  # the gain panels' zoom, outlined
+            (y0, y1), (x0, x1) = box
+            ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ec="white", ls="--", lw=1.0))
         fig.colorbar(im, ax=ax, label="peak SNR (whitened power)")
         ax.set(title="detection map; fitted pixels outlined", xlabel="x (pixel)", ylabel="y (pixel)")
     kinds = summary["diagnostics"].get("source_kinds") or []
@@ -621,6 +624,8 @@ def pixels_figure(summary: dict, where: Path) -> tuple[str, str, str] | None:
         ax = axes[0, first + j]
         top = float(np.nanmax(np.abs(g))) or 1.0
         im = ax.imshow(gain_map, cmap="RdBu_r", vmin=-top, vmax=top, origin="upper")
+        ax.set_xlim(box[1, 0], box[1, 1])
+        ax.set_ylim(box[0, 1], box[0, 0])  # origin upper: y grows downwards
         fig.colorbar(im, ax=ax, label="gain (relative)")
         title = f"{ys.size} pixels fitted jointly: gain and sign"
         if len(maps) > 1:
@@ -689,6 +694,22 @@ td.name{white-space:normal;min-width:12em}td.name code{font-size:.8em;color:#555
 .val{white-space:nowrap}
 td.diag{white-space:normal;text-align:left;overflow-wrap:anywhere;max-width:40em}
 td.prior,th.prior{text-align:left;white-space:normal;min-width:9em}
+#parameters table{width:100%;font-size:.82em}
+#parameters td,#parameters th{white-space:normal;padding:3px 4px}
+#parameters td.name{min-width:10em}#parameters td.name code{font-size:.8em;white-space:normal;overflow-wrap:anywhere}
+#parameters td.prior,#parameters th.prior{min-width:6em}
+@media (max-width:820px){
+#parameters table,#parameters tbody,#parameters tr,#parameters td{display:block;width:auto;min-width:0}
+#parameters tr:first-child{display:none}
+#parameters tr{display:grid;grid-template-columns:1fr 1fr;column-gap:.8em;border:1px solid #ccc;border-radius:6px;margin:.5em 0;padding:.3em .5em}
+#parameters td{border:0;padding:1px 0;text-align:left;overflow-wrap:anywhere}
+#parameters td.name,#parameters td.prior,#parameters td:nth-child(5){grid-column:1/-1}
+#parameters td::before{content:attr(data-label);display:inline-block;min-width:5.5em;margin-right:.3em;color:#666}
+#parameters td.name::before{content:none}#parameters td.name{font-weight:600}
+#parameters td.prior::before{content:"prior"}#parameters td.rhat::before{content:"R-hat"}
+#parameters td.ess-bulk::before{content:"bulk ESS"}#parameters td.ess-tail::before{content:"tail ESS"}
+#parameters td:empty{display:none}
+}
 .note{font-size:.9em;color:#444}
 figure{margin:1em 0}img{max-width:100%;height:auto;display:block}figcaption{font-size:.9em;color:#444}
 code{overflow-wrap:anywhere}
@@ -767,11 +788,15 @@ def _parameters_html(summary: dict, idata: Any, safe: dict, names: list[str]) ->
                 f'<td class="ess-bulk">{format_number(c.get("ess_bulk"), ".0f")}</td>',
                 f'<td class="ess-tail">{format_number(c.get("ess_tail"), ".0f")}</td>',
             ]
-        rows.append(f"<tr>{''.join(cells)}</tr>")
+        # each plain cell names its column (data-label; the classed ones are named by the CSS): on a
+        # narrow screen the rows stack as cards
+        rows.append(
+            "<tr>" + "".join(c.replace("<td>", f'<td data-label="{h}">', 1) for c, h in zip(cells, head)) + "</tr>"
+        )
     if kind is None:
         n_draws = ""
-        if "posterior" in idata.groups():
-            post = idata.posterior
+        post = inference_data.group(idata, "posterior")
+        if post is not None:
             n_draws = f" of {post.sizes.get('chain', 1)} walkers x {post.sizes.get('draw', 0)} draws"
         note = (
             f"Median and 90 % interval (5-95 % quantiles) of the posterior draws{n_draws}. R-hat: rank-normalized "
@@ -844,10 +869,10 @@ def write_report(result: Path, outdir: Path) -> Path:
 
     summary, idata = read_result(result)
     names = list(summary["parameters"])
-    safe = jsonio.loads(idata.observed_data.attrs.get("parameter_names", "{}"))
+    safe = jsonio.loads(inference_data.group(idata, "observed_data").attrs.get("parameter_names", "{}"))
     safe = safe if isinstance(safe, dict) else {}
     v = verdict(summary)
-    group = "posterior" if "posterior" in idata.groups() else "approximate_posterior"
+    group = "posterior" if "posterior" in inference_data.group_names(idata) else "approximate_posterior"
     draws = _draws(idata, group, safe, names)
     figs = _figures(summary, idata, v, names, safe)
     pixels = pixels_figure(summary, result.parent)

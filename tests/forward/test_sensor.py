@@ -1,7 +1,5 @@
 """Sensor noise: seeded, with the stated statistics; shot noise and the ADC."""
 
-import time
-
 import numpy as np
 import pytest
 
@@ -98,10 +96,8 @@ def test_the_dense_path_is_refused_above_the_limit_before_it_starts(scene, monke
     s = scene("roof_elastic", *FAST)  # 100 samples x 2304 subpixels: 1.8 MB dense, ~1.1 MB otherwise
     monkeypatch.setenv("VIBINVERSE_MEMORY_LIMIT", "1.5e6")
     observe(s, seed=1)
-    t0 = time.perf_counter()
     with pytest.raises(SceneError, match=r"100 samples x 2304 subpixels.*limit 1.5 MB.*footprint.resolution") as err:
         observe(s, seed=1, rtol=None)
-    assert time.perf_counter() - t0 < 1.0
     _one_line(err)
 
 

@@ -68,6 +68,8 @@ def hand_made_result(
     import arviz as az
     import xarray as xr
 
+    from vibinverse import inference_data as idata_io
+
     rng = np.random.default_rng(seed)
     t = np.arange(n) * dt
     gaps = rng.random(n) < 0.03
@@ -203,7 +205,7 @@ def hand_made_result(
     groups["constant_data"] = xr.Dataset(constant, coords=sample)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        az.InferenceData(**groups).to_netcdf(str(path), engine="h5netcdf")
+        idata_io.to_netcdf(idata_io.build(groups), path)
     return path
 
 

@@ -1,8 +1,9 @@
 """The report in a real browser (Playwright driving Debian's headless Chromium, /usr/bin/chromium):
 it loads from a file:// URL with no console error and no request that fails or leaves the file,
 every figure decodes, the verdict is the first block and sits within the first screen on a phone
-(390 x 844) and on a desktop (1280 x 800), the body never scrolls sideways on the phone (the
-tables scroll in their own box), and a screenshot shows the verdict box where the layout puts it.
+(390 x 844) and on a desktop (1280 x 800), the body never scrolls sideways, the parameter table
+fits its box at both widths (no sideways scroll of its own: columns that wrap on the desktop, one
+card per parameter on the phone), and a screenshot shows the verdict box where the layout puts it.
 A crafted result's markup runs nothing."""
 
 import io
@@ -98,10 +99,17 @@ def check_page(browser, path, device, screenshot, n_images=None):
         assert width <= w  # no sideways scrolling of the page
         height = page.evaluate("document.documentElement.scrollHeight")
         assert HEIGHT[device][0] <= height <= HEIGHT[device][1], height
-        if device == "phone":  # the parameters table is wider than the phone: it scrolls in its own box
-            assert page.evaluate(
-                "(e => e.scrollWidth > e.clientWidth)(document.querySelector('#parameters .table-wrap'))"
+        # the parameter table needs no sideways scroll in its box, on the desktop as on the phone
+        table = page.evaluate(
+            "(e => [e.scrollWidth, e.clientWidth])(document.querySelector('#parameters .table-wrap'))"
+        )
+        assert table[0] <= table[1], table
+        if device == "phone":  # one card per parameter, each cell labelled with its column
+            labels = page.evaluate(
+                "Array.from(document.querySelectorAll('#parameters td:not(.name)'), "
+                "td => getComputedStyle(td, '::before').content)"
             )
+            assert labels and all(label not in ("none", "", '""') for label in labels), labels
         shot = np.asarray(Image.open(io.BytesIO(page.screenshot())).convert("RGB"), dtype=float)
         assert shot.shape[:2] == (h, w) and shot.var() > 0  # not blank
         # the verdict box where the layout puts it: its border, in the colour of its trust, on its
@@ -119,6 +127,7 @@ def check_page(browser, path, device, screenshot, n_images=None):
             "verdict_top": round(box["y"]),
             "verdict_height": round(box["height"]),
             "page": f"{width}x{height}",
+            "parameter_table": f"{table[0]}/{table[1]}",
             "screenshot_variance": round(float(shot.var())),
             "trust": trust,
         }

@@ -2,8 +2,6 @@
 irregular stamps (against scipy's direct sum), and the frame model's spectral starts on jittered
 stamps with dropped frames."""
 
-import time
-
 import numpy as np
 import pytest
 
@@ -39,8 +37,7 @@ def test_uniform_stamps_keep_the_zero_padded_fft():
 def test_irregular_stamps_take_the_lomb_scargle_periodogram():
     """Jittered stamps with dropped frames: nifty-ls's floating-mean Lomb-Scargle equals scipy's
     direct sum (floating_mean=True) to 1e-6 (nifty-ls's NUFFT tolerance is ~1e-8); its "psd"
-    normalization is |sum y e^{-i w t}|^2 / N, as the FFT's; a 4000-sample periodogram takes
-    milliseconds (scipy's direct sum: ~5 s)."""
+    normalization is |sum y e^{-i w t}|^2 / N, as the FFT's."""
     from scipy.signal import lombscargle
 
     t, _ = _jittered()
@@ -49,9 +46,7 @@ def test_irregular_stamps_take_the_lomb_scargle_periodogram():
     s = validate(t, y)
     assert not s.uniform
     periodogram(s)  # the first call loads the library
-    start = time.perf_counter()
     freqs, power = periodogram(s)
-    assert time.perf_counter() - start < 0.5
     assert freqs[0] == pytest.approx(freqs[1] - freqs[0]) and freqs[-1] <= 0.5 * s.fs
     some = np.arange(0, freqs.size, 97)
     direct = lombscargle(t, y - y.mean(), 2 * np.pi * freqs[some], floating_mean=True)

@@ -18,13 +18,13 @@ from vibinverse.io import cube as cube_module
 from vibinverse.io.cube import CHUNK_BYTES, READERS, REC709, extract_region, open_cube, read_mask, sampling
 from vibinverse.io.video import NpyFrames, stamps_seconds
 
-av = pytest.importorskip("av")
-
 RNG_SEED = 20240501
 
 
 def write_video(path, frames, pts, time_base, codec="ffv1", pix_fmt="gray", in_format="gray", rate=30, options=None):
-    """Frames with explicit presentation stamps `pts` (in `time_base`) through PyAV."""
+    """Frames with explicit presentation stamps `pts` (in `time_base`) through PyAV (a test that writes
+    a video is skipped without it; the other readers' tests run)."""
+    av = pytest.importorskip("av")
     with av.open(str(path), "w") as c:
         s = c.add_stream(codec, rate=rate, options=options or {})
         s.width, s.height, s.pix_fmt = frames.shape[2], frames.shape[1], pix_fmt
@@ -90,6 +90,7 @@ def test_h264_mp4_stamps_exact_and_chunks_decode_as_the_whole(tmp_path):
 def test_gray_h264_in_full_range_gives_its_counts_back(tmp_path):
     """Lossless H.264 (qp 0) of gray frames in full range, as `vibinverse simulate --video` writes
     it: the luma plane is the counts, exactly, in 8-bit integers."""
+    av = pytest.importorskip("av")
     frames = np.random.default_rng(RNG_SEED).integers(0, 256, (20, 16, 24), dtype=np.uint8)
     with av.open(str(tmp_path / "gray.mp4"), "w") as c:
         s = c.add_stream("libx264", rate=30, options={"qp": "0"})
@@ -163,6 +164,7 @@ def test_high_bit_depth_gray_video_keeps_its_counts(tmp_path):
 
 
 def test_opening_a_video_decodes_at_most_its_first_frame(gray_mkv, monkeypatch):
+    av = pytest.importorskip("av")
     path, frames, _ = gray_mkv
     opened = []
     real_open = av.open
@@ -356,6 +358,7 @@ def test_bad_arguments(tmp_path, kwargs, message):
 
 
 def test_bad_videos(gray_mkv, tmp_path):
+    av = pytest.importorskip("av")
     path, _, _ = gray_mkv
     bad = tmp_path / "codec.mkv"  # the codec id renamed: a stream FFmpeg has no decoder for
     bad.write_bytes(path.read_bytes().replace(b"V_FFV1", b"V_QQQQ"))

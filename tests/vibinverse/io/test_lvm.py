@@ -4,7 +4,6 @@ shared/realdata-dev (skipped when absent)."""
 from __future__ import annotations
 
 import logging
-import time
 from pathlib import Path
 
 import numpy as np
@@ -308,14 +307,13 @@ def test_options_that_do_not_apply_are_refused(tmp_path):
     one_line(err)
 
 
-def test_a_large_file_reads_fast(tmp_path):
+def test_a_large_file_reads_every_sample(tmp_path):
     t = np.arange(100_000) / 3200.0
     chans = {name: (np.sin((k + 1) * 100 * t), "g") for k, name in enumerate("abc")}
     p = write(tmp_path, lvm_text(chans, t))
-    load_series(p, value_column="b")  # imports
-    start = time.perf_counter()
     s = load_series(p, value_column="b")
-    assert time.perf_counter() - start < 1.0 and s.time.size == t.size
+    assert s.time.size == t.size
+    np.testing.assert_allclose(s.intensity, chans["b"][0], atol=1e-5)
 
 
 # ----------------------------------------------------------------------------------- real files
@@ -325,31 +323,21 @@ needs_realdata = pytest.mark.skipif(
 )
 
 
-def _timed(path: Path, **options) -> tuple[object, float]:
-    """The series and the best of two reading times (s): the first also imports."""
-    best = float("inf")
-    for _ in range(2):
-        start = time.perf_counter()
-        s = load_series(path, **options)
-        best = min(best, time.perf_counter() - start)
-    return s, best
-
-
 @needs_realdata
 @pytest.mark.parametrize("name", ["data_set_1_downsampled_by_16.lvm", "data_set_3_downsampled_by_16.lvm"])
 def test_the_beam_recordings_are_3200_hz_not_the_header_51200(name):
-    s, seconds = _timed(BEAM / name, value_column="2")
+    s = load_series(BEAM / name, value_column="2")
     assert s.time.size == 63_041 and s.uniform
     assert s.fs == pytest.approx(3200.0, rel=1e-4)
-    assert s.intensity_units == "g" and seconds < 1.0
+    assert s.intensity_units == "g"
     assert any("Delta_X 1.953125e-05 s (51200 Hz) disagrees with the X_Value column (3200 Hz)" in n for n in s.notes)
     assert load_series(BEAM / name, value_column="Force").intensity_units == "Pounds"
 
 
 @needs_realdata
 def test_the_footbridge_recording_is_51200_over_7_hz():
-    s, seconds = _timed(FOOTBRIDGE, value_column="Acceleration_0")
-    assert s.time.size == 88_800 and s.uniform and seconds < 1.0
+    s = load_series(FOOTBRIDGE, value_column="Acceleration_0")
+    assert s.time.size == 88_800 and s.uniform
     assert s.fs == pytest.approx(7314.29, rel=5e-4)
     assert any("Delta_X 0.000137 s" in n and "the column is used" in n for n in s.notes)
     for choice in ("1", "Acceleration_2"):

@@ -2,7 +2,6 @@
 `vibinverse simulate` refuses bad input with one line, exit code 2 and no output file."""
 
 import re
-import time
 from pathlib import Path
 
 import numpy as np
@@ -104,9 +103,7 @@ def test_simulate_refuses_bad_input_in_one_line_without_output(tmp_path, case):
     args, message = CASES[case]
     out = tmp_path / "out"
     out.mkdir()
-    t0 = time.perf_counter()
     r = run_cli("simulate", *args(tmp_path), "-o", str(out), "--plot")
-    elapsed = time.perf_counter() - t0
     assert r.returncode == 2, r.stderr[-2000:]
     assert "Traceback" not in r.stderr
     lines = r.stderr.splitlines()
@@ -114,4 +111,3 @@ def test_simulate_refuses_bad_input_in_one_line_without_output(tmp_path, case):
     assert len(lines[0]) < 500
     assert re.search(message, lines[0]), lines[0]
     assert list(out.iterdir()) == []
-    assert elapsed < 15.0  # interpreter start and imports included (~2-3 s); the refusal itself is < ~1 s
