@@ -283,7 +283,9 @@ def fit_order(
             best = (ll, sort_labels(space.from_z(z), spec))
     if best is None or not math.isfinite(best[0]) or best[0] <= -1e299:
         raise NumericalError(f"model order: no finite likelihood for {spec}")
-    return OrderFit(spec, model, best[1], best[0], len(names), model.n_obs, windows)
+    # orders are compared by the exact ln L at their optimum, whichever engine found it
+    ll = best[0] if model.spectral is None else model.exact_log_likelihood(best[1])
+    return OrderFit(spec, model, best[1], ll, len(names), model.n_obs, windows)
 
 
 def _wrapped(name: str, value: float, centre: float) -> float:

@@ -1,0 +1,129 @@
+"""Whittle's engine (`vibinverse.engines.whittle`): the differenced density against the model's
+covariances (its integrals are var(d) and cov(d_k, d_k-1)), a walk's differences white, and the
+likelihood against the Kalman filter's on a long record."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from vibinverse.engines.whittle import Periodogram, block_layout, spectral_density
+from vibinverse.io.series import Series
+from vibinverse.kalman import oscillator_fill
+from vibinverse.models.modal import WHITTLE_MIN_SAMPLES, ModalModel
+
+
+def tables(dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """An oscillator (3 Hz, zeta 0.05, rms 1.3) and an Ornstein-Uhlenbeck state (0.2 s, rms 0.7):
+    (phi, q, stationary covariance, h, starts, sizes)."""
+    w, zeta, rms = 2 * math.pi * 3.0, 0.05, 1.3
+    phi, q = np.zeros((1, 3, 3)), np.zeros((1, 3, 3))
+    oscillator_fill(w, zeta * w, 4 * zeta * w**3 * rms**2, np.array([dt]), phi[:, :2, :2], q[:, :2, :2], 0)
+    tau, var = 0.2, 0.49
+    phi[0, 2, 2] = math.exp(-dt / tau)
+    q[0, 2, 2] = -var * math.expm1(-2 * dt / tau)
+    p = np.diag([rms**2, (w * rms) ** 2, var])
+    h = np.array([1.0, 0.0, 1.0])
+    starts, sizes = block_layout(np.array([0, 0, 2]), np.array([2, 2, 3]))
+    return phi[0], q[0], p, h, starts, sizes
+
+
+def density(phi, q, h, r, starts, sizes, w, diff=1):
+    out = np.empty(w.size)
+    spectral_density(np.cos(w), np.sin(w), 4 * np.sin(w / 2) ** 2, diff, phi, q, h, r, starts, sizes, out)
+    return out
+
+
+@pytest.mark.parametrize("dt", [0.01, 0.09])  # far below Nyquist, and the mode near it (5.6 Hz)
+def test_density_integrates_to_the_differences_covariances(dt):
+    phi, q, p, h, starts, sizes = tables(dt)
+    r = 0.3**2
+    # the stationary covariance solves P = Phi P Phi' + Q (the tables' exact discretization)
+    assert np.allclose(phi @ p @ phi.T + q, p, rtol=1e-9, atol=1e-9 * p.max())
+    c0 = h @ p @ h + r
+    c1 = h @ phi @ p @ h
+    c2 = h @ phi @ phi @ p @ h
+    n = 400_000
+    w = (np.arange(n) + 0.5) * math.pi / n
+    f = density(phi, q, h, r, starts, sizes, w)
+    var_d = f.mean()  # (1 / pi) int_0^pi f
+    lag1 = (f * np.cos(w)).mean()
+    assert var_d == pytest.approx(2 * (c0 - c1), rel=1e-6)
+    assert lag1 == pytest.approx(2 * c1 - c0 - c2, rel=1e-6, abs=1e-9)
+    # the record itself (a stationary model): var(y) and cov(y_k, y_k-1)
+    f = density(phi, q, h, r, starts, sizes, w, diff=0)
+    assert f.mean() == pytest.approx(c0, rel=1e-6)
+    assert (f * np.cos(w)).mean() == pytest.approx(c1, rel=1e-6)
+
+
+def test_walk_differences_are_white_and_blocks_are_read_from_bounds():
+    starts, sizes = block_layout(np.array([0, 1, 1, 3]), np.array([1, 3, 3, 4]))
+    assert starts.tolist() == [0, 1, 3] and sizes.tolist() == [1, 2, 1]
+    phi, q = np.ones((1, 1)), np.full((1, 1), 0.04)
+    w = np.linspace(1e-4, math.pi, 50)
+    f = density(phi, q, np.ones(1), 0.0, np.zeros(1, np.int64), np.ones(1, np.int64), w)
+    assert np.allclose(f, 0.04, rtol=1e-9)
+
+
+def test_white_noise_whittle_has_the_exact_information():
+    """White noise alone: the curvature of Whittle's ln L in sigma is the exact information
+    2 n / sigma^2 (within its sampling spread, ~1.5 % here), hence the interval's width."""
+    rng = np.random.default_rng(4)
+    n = 30_001
+    y = rng.normal(0.0, 0.5, n)
+    pg = Periodogram(n, 0)
+    power = pg.of(y)
+    zero = np.zeros((1, 1))
+    blocks = (np.zeros(1, np.int64), np.ones(1, np.int64))
+    lls = [pg.log_likelihood(power, zero, zero, np.zeros(1), s * s, *blocks) for s in (0.49, 0.5, 0.51)]
+    curv = (lls[0] - 2 * lls[1] + lls[2]) / 0.01**2
+    assert -curv == pytest.approx(2 * n / 0.25, rel=0.05)
+
+
+def long_record(seed: int, n: int = 40_000) -> Series:
+    rng = np.random.default_rng(seed)
+    dt = 0.01
+    phi, q, p = tables(dt)[:3]
+    x = rng.multivariate_normal(np.zeros(3), p)
+    chol = np.linalg.cholesky(q[:2, :2])
+    out = np.empty(n)
+    for k in range(n):
+        x[:2] = phi[:2, :2] @ x[:2] + chol @ rng.normal(size=2)
+        out[k] = x[0]
+    walk = np.cumsum(rng.normal(0, 0.05, n))
+    return Series(np.arange(n) * dt, 2.0 + out + walk + rng.normal(0, 0.3, n), "test")
+
+
+def test_modal_model_uses_whittle_on_long_uniform_records_and_it_tracks_the_filter():
+    series = long_record(1)
+    model = ModalModel({"modal": {"modes": 1, "drift": True}}, series)
+    assert model.spectral is not None and series.time.size >= WHITTLE_MIN_SAMPLES
+    truth = {
+        "level": 2.0,
+        "modes[0].frequency": 3.0,
+        "modes[0].damping_ratio": 0.05,
+        "modes[0].rms": 1.3,
+        "drift.rate": 0.05 / math.sqrt(0.01),
+        "noise.sigma": 0.3,
+    }
+    base_w, base_k = model.log_likelihood(truth), model.exact_log_likelihood(truth)
+    assert abs(base_w - base_k) < 1e-3 * abs(base_k)
+    for name, factor in [
+        ("modes[0].frequency", 1.01),
+        ("modes[0].damping_ratio", 1.15),
+        ("modes[0].rms", 1.04),
+        ("drift.rate", 1.2),
+        ("noise.sigma", 1.02),
+    ]:
+        v = {**truth, name: truth[name] * factor}
+        dw = model.log_likelihood(v) - base_w
+        dk = model.exact_log_likelihood(v) - base_k
+        assert dk < -2.0  # the step is informative
+        assert dw == pytest.approx(dk, rel=0.1), name
+    # a short record, a gap, or a gain drift: the Kalman filter
+    assert ModalModel({"modal": {"modes": 1}}, series.head(WHITTLE_MIN_SAMPLES - 1)).spectral is None
+    assert ModalModel({"modal": {"modes": 1, "gain": 2}}, series).spectral is None
+    gappy = Series(series.time, np.where(np.arange(series.time.size) == 77, np.nan, series.intensity), "gap")
+    assert ModalModel({"modal": {"modes": 1}}, gappy).spectral is None

@@ -1,0 +1,177 @@
+"""The frequency-domain engine: Whittle's likelihood of a long uniform record, computed from the
+same block-diagonal state-space tables the Kalman engine runs (`vibinverse.engines.kalman`).
+
+A model x_k = Phi x_{k-1} + w_k (w ~ N(0, Q)), y_k = h . x_k + v_k (v ~ N(0, r)) has the
+spectral density (per sample, two-sided, angular frequency w in radians per sample, z = e^{iw})
+
+    f(w) = h (zI - Phi)^{-1} Q (zI - Phi)^{-H} h' + r,
+
+exact for the sampled process (aliasing included: the tables are the exact discretization). The
+engine works on the first differences d_k = y_k - y_{k-1} (m = n - 1 of them), whose density is
+c(w) f(w), c = |1 - z^{-1}|^2 = 4 sin^2(w / 2): a random walk's pole cancels (its differences are
+white), the level drops out, and the walk's end-to-end jump does not leak into the periodogram.
+Whittle's approximation of the Gaussian log-likelihood of d, with I_j = |sum_k d_k z_j^{-k}|^2 / m
+at the Fourier frequencies w_j = 2 pi j / m, j = 1 .. (m - 1) / 2 (each a complex coefficient of two
+degrees of freedom; the Nyquist ordinate, when m is even, one):
+
+    log L = -(m - 1) / 2 log(2 pi) - sum_j [log f_j + I_j / f_j] - (Nyquist) 1/2 [log f_N + I_N / f_N].
+
+Cost: one real FFT of the record when the mean changes (lines), O(blocks) per ordinate otherwise;
+the Kalman filter's O(states^2) per sample with a fixed point in its gain is ~10x dearer per call.
+It holds for stationary Gaussian records long against the slowest correlation time (the order
+search and fits of long uniform records: `vibinverse.models.modal`); gaps, irregular stamps and a
+multiplicative gain drift need the Kalman engine.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vibinverse.engines.kalman import njit
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def spectral_density(cw, sw, c, diff, phi, q, h, r, starts, sizes, out):  # pragma: no cover - compiled
+    """The series' spectral density f(w) (diff 0), or its first differences' c(w) f(w) (diff 1), at
+    each ordinate (cw = cos w, sw = sin w, c = 4 sin^2(w / 2)), written into `out`; blocks of 1 or
+    2 states start at `starts` (sizes)."""
+    for j in range(cw.shape[0]):
+        g = c[j] if diff else 1.0
+        acc = r * g
+        for b in range(starts.shape[0]):
+            o = starts[b]
+            if sizes[b] == 1:
+                p = phi[o, o]
+                if h[o] == 0.0 or (p == 1.0 and c[j] == 0.0):  # unseen, or a walk at zero frequency
+                    continue
+                # |z - p|^2 = (1 - p)^2 + p c: a walk (p = 1) gives c / c = 1 without cancelling
+                acc += h[o] * h[o] * q[o, o] * g / ((1.0 - p) * (1.0 - p) + p * c[j])
+            else:
+                h1, h2 = h[o], h[o + 1]
+                if h1 == 0.0 and h2 == 0.0:
+                    continue
+                a11, a12, a21, a22 = phi[o, o], phi[o, o + 1], phi[o + 1, o], phi[o + 1, o + 1]
+                # M = zI - Phi; h M^{-1} = (n1, n2) / det with n1 = h1 M22 - h2 M21, n2 = h2 M11 - h1 M12
+                m11r, m11i = cw[j] - a11, sw[j]
+                m22r, m22i = cw[j] - a22, sw[j]
+                n1r, n1i = h1 * m22r + h2 * a21, h1 * m22i
+                n2r, n2i = h2 * m11r + h1 * a12, h2 * m11i
+                detr = m11r * m22r - m11i * m22i - a12 * a21
+                deti = m11r * m22i + m11i * m22r
+                num = (
+                    q[o, o] * (n1r * n1r + n1i * n1i)
+                    + q[o + 1, o + 1] * (n2r * n2r + n2i * n2i)
+                    + 2.0 * q[o, o + 1] * (n1r * n2r + n1i * n2i)
+                )
+                acc += g * num / (detr * detr + deti * deti)
+        out[j] = acc
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def whittle_sum(power, density, nyquist):  # pragma: no cover - compiled
+    """-sum_j [log f_j + I_j / f_j] with weight 1/2 on the last ordinate when it is the Nyquist one;
+    -inf at a density <= 0 (a model that cannot produce the data)."""
+    acc = 0.0
+    last = power.shape[0] - 1
+    for j in range(power.shape[0]):
+        f = density[j]
+        if not f > 0.0:
+            return -np.inf
+        term = math.log(f) + power[j] / f
+        acc -= 0.5 * term if (nyquist and j == last) else term
+    return acc
+
+
+class Periodogram:
+    """The periodogram of a uniform record of n samples (`differences` 0), or of its first
+    differences (1: a model with a random walk), at the Fourier frequencies j = 1 .. m / 2 of its
+    m = n - differences values (`Periodogram.of`), and the likelihood under a model's tables."""
+
+    def __init__(self, n: int, differences: int):
+        if differences not in (0, 1):
+            raise ValueError(f"differences: {differences}; allowed: 0 or 1")
+        self.differences = differences
+        self.m = int(n) - differences
+        j = np.arange(1, self.m // 2 + 1)
+        w = 2.0 * np.pi * j / self.m
+        self.cw, self.sw = np.cos(w), np.sin(w)
+        self.c = 4.0 * np.sin(0.5 * w) ** 2
+        self.nyquist = self.m % 2 == 0
+
+    def of(self, y: np.ndarray) -> np.ndarray:
+        """I_j of y (length n), or of its first differences."""
+        d = np.diff(np.asarray(y, dtype=float)) if self.differences else np.asarray(y, dtype=float)
+        spec = np.fft.rfft(d)[1 : self.m // 2 + 1]
+        return (spec.real**2 + spec.imag**2) / self.m
+
+    def log_likelihood(
+        self,
+        power: np.ndarray,
+        phi: np.ndarray,
+        q: np.ndarray,
+        h: np.ndarray,
+        r: float,
+        starts: np.ndarray,
+        sizes: np.ndarray,
+        stationary_variance: float = 0.0,
+    ) -> float:
+        """Whittle's log-likelihood (module docstring) of the values whose periodogram is `power`,
+        under the one-step tables (phi, q), observation row h, white variance r and the blocks
+        (starts, sizes); the zero frequency left out (`zero_frequency_term`). Differenced, the
+        variance of the model's stationary part (`stationary_variance`, h P0 h' + r with the walk
+        at 0) gives the end-to-end jump's share of every ordinate."""
+        density = np.empty(self.c.size)  # per call: threads evaluate walkers at once
+        spectral_density(self.cw, self.sw, self.c, self.differences, phi, q, h, r, starts, sizes, density)
+        if self.differences and stationary_variance > 0.0:
+            density += 2.0 * stationary_variance / self.m  # the end-to-end jump's share (module docstring)
+        ll = whittle_sum(power, density, self.nyquist)
+        return float(ll - 0.5 * (self.m - 1) * _LOG_2PI)
+
+    def zero_density(
+        self, phi: np.ndarray, q: np.ndarray, h: np.ndarray, r: float, starts: np.ndarray, sizes: np.ndarray
+    ) -> float:
+        """f(0), the model's stationary part's density at zero frequency (a walk left out)."""
+        f0 = np.empty(1)
+        spectral_density(np.ones(1), np.zeros(1), np.zeros(1), 0, phi, q, h, r, starts, sizes, f0)
+        return float(f0[0])
+
+
+def walk_step_variance(phi: np.ndarray, q: np.ndarray, h: np.ndarray, starts: np.ndarray, sizes: np.ndarray) -> float:
+    """The step variance the model's random walks add to the observation: h_i^2 Q_ii of each seen
+    1 x 1 block whose transition is 1 (0 without a walk)."""
+    out = 0.0
+    for o, size in zip(starts, sizes):
+        if size == 1 and phi[o, o] == 1.0 and h[o] != 0.0:
+            out += float(h[o] * h[o] * q[o, o])
+    return out
+
+
+def level_window(f0: float, step_variance: float, n: int) -> int:
+    """The leading samples whose mean carries the level best: the whole record without a walk, else
+    K = sqrt(3 f(0) / q) (the stationary part's share of the mean's variance f(0) / K against the
+    walk's q K / 3), within 1..n."""
+    if not step_variance > 0.0:
+        return int(n)
+    return int(min(n, max(1, round(math.sqrt(3.0 * max(f0, 0.0) / step_variance)))))
+
+
+def level_term(window_mean: float, window: int, f0: float, variance: float, step_variance: float) -> float:
+    """The level's share of the likelihood: the mean residual of the first `window` samples
+    ~ N(0, min(f(0) / K, v) + q K / 3) (v the stationary part's variance, q the walk's step
+    variance; the walk starts at 0)."""
+    var = min(max(f0, 0.0) / window, variance) + step_variance * window / 3.0
+    if not var > 0.0:
+        return -math.inf
+    return float(-0.5 * (_LOG_2PI + math.log(var) + window_mean * window_mean / var))
+
+
+def block_layout(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(starts, sizes) of the diagonal blocks from each state's block bounds (lo[i], hi[i])."""
+    lo = np.asarray(lo, dtype=np.int64)
+    hi = np.asarray(hi, dtype=np.int64)
+    first = np.flatnonzero(lo == np.arange(lo.size))
+    return first.astype(np.int64), (hi[first] - lo[first]).astype(np.int64)
