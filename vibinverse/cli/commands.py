@@ -19,6 +19,7 @@ from typing import Any
 
 from forward.reduce import DEFAULT_RTOL, compile_scene
 from vibinverse import __version__, api
+from vibinverse.cli import ranges
 from vibinverse.cli.outputs import created, output_dir, output_option
 from vibinverse.errors import InputError, scene_errors
 from vibinverse.io import jsonio
@@ -45,6 +46,13 @@ DESIGN_FILES = ("design.csv", "design.json", "design_sensitivity.png", "design_c
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (argparse prints usage too)
         raise InputError(f"{self.prog}: {message}")
+
+    def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> Any:
+        # argparse drops a "--" given as an option's value (--seed=--) and then passes [] on as the
+        # value, unchecked by the option's type: refuse it as a missing value
+        if action.option_strings and action.nargs is None and list(arg_strings) == ["--"]:
+            self.error(f"argument {'/'.join(action.option_strings)}: expected one argument")
+        return super()._get_values(action, arg_strings)
 
 
 # ---------------------------------------------------------------- -o DIR and --json, for every verb
@@ -590,6 +598,8 @@ def _verbosity_options(parser: argparse.ArgumentParser, default: object) -> None
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from vibinverse.io.cube_writer import MAX_FPS as VIDEO_FPS_MAX
+
     p = _Parser(
         prog="vibinverse", description="Passive optical vibrometry: simulate and invert pixel intensity series."
     )
@@ -617,7 +627,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="dotted.key=value",
         help="override a scene value, e.g. --set sensor.inclination='pi/3+0.02' (repeatable)",
     )
-    sim.add_argument("--seed", type=int, default=None, help="noise seed (reproducible output)")
+    sim.add_argument(
+        "--seed", type=ranges.seed, default=None, help=f"noise seed (reproducible output), in {ranges.SEED_RANGE}"
+    )
     output_option(
         sim,
         "simulation",
@@ -644,13 +656,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sim.add_argument(
         "--video-fps",
-        type=float,
+        type=ranges.real(0.0, VIDEO_FPS_MAX, high_open=False),
         metavar="F",
         help="the video's nominal frame rate (default: the scene's sampling.fs), e.g. 30 for a slow-motion file",
     )
     sim.add_argument(
         "--rtol",
-        type=float,
+        type=ranges.positive,
         default=DEFAULT_RTOL,
         help=f"accuracy of the fast evaluation, relative to each surface's peak-to-peak (default {DEFAULT_RTOL:g})",
     )
@@ -698,7 +710,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fit.add_argument(
         "--fs",
-        type=float,
+        type=ranges.positive,
         metavar="HZ",
         help="sampling rate of a table without a time column, an .npz without time or rate, or an lvm file without "
         "X_Value columns: time = arange(n) / fs",
@@ -708,8 +720,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="scene file describing the observation (TOML); without it the generic modal model "
         "(resonances, lines, drift and coloured noise in intensity units, the order chosen by BIC)",
     )
-    fit.add_argument("--modes", type=int, metavar="K", help="without --scene: fix the number of resonances (0-6)")
-    fit.add_argument("--lines", type=int, metavar="L", help="without --scene: fix the number of lines (0-6)")
+    fit.add_argument(
+        "--modes", type=ranges.integer(0, 6), metavar="K", help="without --scene: fix the number of resonances (0-6)"
+    )
+    fit.add_argument(
+        "--lines", type=ranges.integer(0, 6), metavar="L", help="without --scene: fix the number of lines (0-6)"
+    )
     fit.add_argument(
         "--drift",
         choices=("none", "walk", "integrated"),
@@ -741,14 +757,16 @@ def build_parser() -> argparse.ArgumentParser:
         "in place of emcee); map is a derivative-free MAP (scipy); importance: the MAP's Laplace approximation "
         "corrected by importance sampling (PSIS), emcee when its check fails",
     )
-    fit.add_argument("--seed", type=int, default=0)
+    fit.add_argument("--seed", type=ranges.seed, default=0, help=f"random seed, in {ranges.SEED_RANGE}")
     fit.add_argument(
         "--workers",
-        type=int,
+        type=ranges.workers,
         default=1,
         help="the sampler's workers: threads where the likelihood releases the GIL (frame, modal), else processes",
     )
-    fit.add_argument("--max-steps", type=int, default=20000, help="cap on MCMC steps")
+    fit.add_argument(
+        "--max-steps", type=ranges.max_steps, default=20000, help=f"cap on MCMC steps, in [1, {ranges.MAX_STEPS}]"
+    )
     fit.add_argument("--chain", metavar="FILE", help=f"HDF5 checkpoint of the sampler (default: DIR/{CHAIN})")
     fit.add_argument("--resume", action="store_true", help="continue an interrupted MCMC run from its checkpoint")
     fit.add_argument("--no-progress", action="store_true")
@@ -787,15 +805,20 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="PARAM",
         help="parameter whose Cramer-Rao sd to report (repeat); default: frequency and amplitude",
     )
-    design.add_argument("--threshold", type=float, default=1e-4, help="detectability threshold on S (default 1e-4)")
+    design.add_argument(
+        "--threshold",
+        type=ranges.real(0.0, float("inf"), low_open=False),
+        default=1e-4,
+        help="detectability threshold on S (default 1e-4)",
+    )
     design.add_argument("--set", action="append", metavar="dotted.key=value", help="override a scene value")
     design.add_argument(
         "--pixels",
-        type=int,
+        type=ranges.count,
         default=1,
         help="N equal pixels fitted jointly (fit CUBE --pixels): the multi-pixel Cramer-Rao bound (default 1)",
     )
-    design.add_argument("--workers", type=int, default=1, help="processes")
+    design.add_argument("--workers", type=ranges.workers, default=1, help=f"processes, in [1, {ranges.MAX_WORKERS}]")
     design.add_argument("--no-progress", action="store_true")
     output_option(design, "design", ", ".join(DESIGN_FILES))
     design.set_defaults(func=cmd_design)
@@ -858,7 +881,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument(
         "--workers",
-        type=int,
+        type=ranges.workers,
         metavar="N",
         help="with --robustness --scene or --realdata: processes (default: min(2, cores))",
     )
@@ -866,7 +889,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     demo = sub.add_parser("demo", parents=[verbosity, printing], help="run the main job on a built-in scene")
     output_option(demo, "vibinverse-demo", ", ".join((SERIES, SERIES_PLOT, RESULT, SUMMARY, CHAIN, REPORT)))
-    demo.add_argument("--seed", type=int, default=0)
+    demo.add_argument("--seed", type=ranges.seed, default=0, help=f"random seed, in {ranges.SEED_RANGE}")
     demo.add_argument("--no-progress", action="store_true")
     demo.set_defaults(func=cmd_demo)
     from vibinverse.cli.init_command import add_init_parser

@@ -17,12 +17,14 @@ import re
 import sys
 from typing import Any
 
+from vibinverse.cli import ranges
 from vibinverse.cli.outputs import created, output_dir
 
 logger = logging.getLogger("vibinverse")
 
 DETECTION, DETECTION_PLOT, LINES = "detection.nc", "detection.png", "lines.csv"  # fixed names in -o DIR
 DEFAULT_OUTPUT = "detect"
+MAX_MEMORY = 2**50  # --memory: 1 PiB
 DEFAULT_MEMORY = "512MiB"  # vibinverse.imaging.detection_map.DEFAULT_MEMORY, as the option shows it
 CHANNELS = ("luminance", "r", "g", "b")  # vibinverse.io.cube's channels
 LOGGED_CLUSTERS = 5  # the log names a line's strongest clusters; lines.csv has them all
@@ -37,8 +39,12 @@ def parse_band(text: str) -> tuple[float, float]:
             raise ValueError
         lo = float(m.group(1)) if m.group(1) else 0.0
         hi = float(m.group(2)) if m.group(2) else float("inf")
+        if not (math.isfinite(lo) and lo >= 0) or math.isnan(hi):  # the order: against Nyquist, later
+            raise ValueError
     except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid band {text!r} (fmin:fmax in Hz, e.g. 1:40 or 5:)") from None
+        raise argparse.ArgumentTypeError(
+            f"invalid band {text[:40]!r} (fmin:fmax in Hz, fmin >= 0, e.g. 1:40 or 5:)"
+        ) from None
     return lo, hi
 
 
@@ -48,10 +54,10 @@ def parse_memory(text: str) -> int:
 
     try:
         value = int(parse_bytes(text))
-    except (ValueError, TypeError):
-        raise argparse.ArgumentTypeError(f"invalid size {text!r} (e.g. 512MB, 2GiB)") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"invalid size {text!r} (more than 0 bytes)")
+    except (ValueError, TypeError, OverflowError):
+        raise argparse.ArgumentTypeError(f"invalid size {text[:40]!r} (e.g. 512MB, 2GiB; in [1 byte, 1 PiB])") from None
+    if not 0 < value <= MAX_MEMORY:
+        raise argparse.ArgumentTypeError(f"invalid size {text[:40]!r} (more than 0 bytes, at most 1 PiB)")
     return value
 
 
@@ -83,14 +89,22 @@ def add_detect_parser(sub: Any, parents: list) -> None:
     )
     g.add_argument(
         "--alpha",
-        type=float,
+        type=ranges.real(0.0, 1.0),
         default=1e-3,
         help="false-alarm probability of a line over the whole map, and the expected fraction of a line's pixels "
         "that are noise, in (0, 1) (default 1e-3)",
     )
-    g.add_argument("--max-lines", type=int, default=8, metavar="N", help="keep the N strongest lines (default 8)")
+    g.add_argument(
+        "--max-lines",
+        type=ranges.integer(1, 1000),
+        default=8,
+        metavar="N",
+        help="keep the N strongest lines (default 8)",
+    )
     r = p.add_argument_group("reading")
-    r.add_argument("--fps", type=float, metavar="HZ", help="the real frame rate, overriding the file's (slow motion)")
+    r.add_argument(
+        "--fps", type=ranges.positive, metavar="HZ", help="the real frame rate, overriding the file's (slow motion)"
+    )
     r.add_argument(
         "--channel", choices=CHANNELS, default="luminance", help="colour frames: luminance (default) or one channel"
     )
@@ -99,7 +113,7 @@ def add_detect_parser(sub: Any, parents: list) -> None:
     d.add_argument(
         "--scheduler", metavar="ADDRESS", help="run on this dask.distributed scheduler (default: local threads)"
     )
-    d.add_argument("--workers", type=int, metavar="N", help="local threads (default: the machine's cores)")
+    d.add_argument("--workers", type=ranges.workers, metavar="N", help="local threads (default: the machine's cores)")
     d.add_argument(
         "--memory",
         type=parse_memory,

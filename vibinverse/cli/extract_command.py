@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from vibinverse.cli.outputs import output_dir
+from vibinverse.cli import ranges
+from vibinverse.cli.outputs import one_line, output_dir
 from vibinverse.errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -77,19 +78,19 @@ def add_extract_parser(sub: Any, parents: list) -> None:
         metavar="FILE",
         help="a boolean frame (.npy, or .png: non-zero is in) of the frame's shape; pixels outside become NaN",
     )
-    p.add_argument("--bin", type=int, default=1, metavar="N", help="N x N mean binning (default 1: none)")
+    p.add_argument("--bin", type=ranges.count, default=1, metavar="N", help="N x N mean binning (default 1: none)")
     p.add_argument("--frames", type=_frames, metavar="a:b", help="frame range, half-open (default: all)")
     timing = p.add_argument_group("time")
     timing.add_argument(
         "--fps",
-        type=float,
+        type=ranges.positive,
         metavar="HZ",
         help="the true frame rate: overrides the container's (a 600 fps capture stored as 30 fps: times scale by "
         "nominal/HZ); required for .npy, TIFF and MRAW without a rate",
     )
     timing.add_argument(
         "--line-time",
-        type=float,
+        type=ranges.real(0.0, float("inf"), low_open=False),
         metavar="SECONDS",
         help="rolling shutter: each row is exposed this much after the one above (coordinate row_offset; a "
         "pixel's time = time + row_offset)",
@@ -103,7 +104,7 @@ def add_extract_parser(sub: Any, parents: list) -> None:
     p.add_argument("--variable", metavar="NAME", help="netCDF/zarr input: the 3-D variable (default: the only one)")
     p.add_argument(
         "--chunks",
-        type=int,
+        type=ranges.count,
         metavar="FRAMES",
         help="frames per chunk read (default: ~64 MB of whole frames; a video's chunks start at keyframes); for a "
         "video, a multiple of its keyframe interval decodes each frame once",
@@ -223,10 +224,11 @@ def _times(cube: Any) -> np.ndarray:
 
 def _header(cube: Any, what: str, source: str) -> list[str]:
     attrs = cube.attrs
-    bits = f"; bit depth {attrs['bit_depth']}" if "bit_depth" in attrs else ""
-    lines = [f"vibinverse extract: {what} of {source}", f"intensity units: {attrs.get('units', '')}{bits}"]
+    bits = f"; bit depth {one_line(attrs['bit_depth'])}" if "bit_depth" in attrs else ""
+    units = one_line(attrs.get("units", ""))  # the input's text: one comment line whatever it holds
+    lines = [f"vibinverse extract: {what} of {one_line(source)}", f"intensity units: {units}{bits}"]
     if cube["time"].attrs.get("reference"):
-        lines.append(f"time: seconds since {cube['time'].attrs['reference']} (the first frame)")
+        lines.append(f"time: seconds since {one_line(cube['time'].attrs['reference'])} (the first frame)")
     return lines
 
 

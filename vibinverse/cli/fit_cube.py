@@ -8,9 +8,12 @@ from __future__ import annotations
 import argparse
 import csv
 import logging
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from vibinverse.cli import ranges
+from vibinverse.cli.outputs import csv_cell
 from vibinverse.errors import InputError
 
 if TYPE_CHECKING:
@@ -41,7 +44,7 @@ def add_cube_options(parser: argparse.ArgumentParser) -> None:
         "signal and its amplitudes are a displacement in pixels (edges moving across pixels, ground-level video)",
     )
     parser.add_argument(
-        "--scale", type=float, metavar="METRES_PER_PIXEL", help="with --displacement: displacements in metres"
+        "--scale", type=ranges.positive, metavar="METRES_PER_PIXEL", help="with --displacement: displacements in metres"
     )
     parser.add_argument(
         "--band",
@@ -58,7 +61,7 @@ def add_cube_options(parser: argparse.ArgumentParser) -> None:
         "--scene: the pixel the scene describes; default: the pixel of the largest SNR share)",
     )
     parser.add_argument(
-        "--fps", type=float, metavar="HZ", help="with --pixels: the cube's frame rate, overriding the file's"
+        "--fps", type=ranges.positive, metavar="HZ", help="with --pixels: the cube's frame rate, overriding the file's"
     )
     parser.add_argument(
         "--channel",
@@ -69,7 +72,7 @@ def add_cube_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--variable", metavar="NAME", help="with --pixels: the cube's variable in a netCDF/zarr file")
     parser.add_argument(
         "--sources",
-        type=int,
+        type=ranges.count,
         metavar="K",
         help="with --pixels: K >= 2 sources (tilt modes, drive lines) seen by the pixels in different mixtures, "
         "fitted jointly: per source a gain column (gain_0, gain_1, ... in "
@@ -83,7 +86,11 @@ def _band(text: str) -> tuple[float, float]:
     try:
         lo, hi = (float(v) for v in text.split(":"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid band {text!r} (FMIN:FMAX in Hz, e.g. 2:8)") from None
+        lo = hi = math.nan
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
+        raise argparse.ArgumentTypeError(
+            f"invalid band {text[:40]!r} (FMIN:FMAX in Hz, 0 <= FMIN < FMAX, finite, e.g. 2:8)"
+        ) from None
     return lo, hi
 
 
@@ -91,7 +98,11 @@ def _pixel(text: str) -> tuple[int, int]:
     try:
         y, x = (int(v) for v in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid pixel {text!r} (Y,X: row and column indices, e.g. 3,7)") from None
+        y = x = -1
+    if not (0 <= y < ranges.MAX_COUNT and 0 <= x < ranges.MAX_COUNT):
+        raise argparse.ArgumentTypeError(
+            f"invalid pixel {text[:40]!r} (Y,X: row and column indices >= 0, e.g. 3,7)"
+        ) from None
     return y, x
 
 
@@ -168,4 +179,4 @@ def write_pixels_csv(path: Path, result: FitResult) -> None:
         writer = csv.writer(fh)
         writer.writerow(columns)
         for row in zip(*(table[c] for c in columns)):
-            writer.writerow([repr(v) if isinstance(v, float) else v for v in row])
+            writer.writerow([repr(v) if isinstance(v, float) else csv_cell(v) for v in row])

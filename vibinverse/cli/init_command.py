@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from vibinverse.errors import InputError
-from vibinverse.io.scene_template import SceneAnswers, check_answer, flag, scene_template
+from vibinverse.io.scene_template import _RANGES, SceneAnswers, check_answer, flag, scene_template
 
 logger = logging.getLogger("vibinverse")
 
@@ -208,6 +208,38 @@ def add_init_parser(sub: Any, parents: list) -> None:
     )
     asking.add_argument("--no-input", action="store_true", help="never ask: answers not given take their defaults")
     p.set_defaults(func=cmd_init)
+    for action in p._actions:  # numbers checked against their ranges at parse time (one line, exit 2)
+        if action.dest in _RANGES or action.dest == "resolution":
+            action.type = _checked(action.dest, action.type or str)
+
+
+def _allowed(name: str) -> str:
+    """The allowed range of a numeric answer, as the messages write it."""
+    if name not in _RANGES:
+        return "an integer in [1, 4096]"  # resolution (`check_answer`)
+    lo, hi, lo_open, hi_open = _RANGES[name]
+    return f"the range {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+
+
+def _checked(name: str, parse: Callable[[str], Any]) -> Callable[[str], Any]:
+    """argparse `type=` of a numeric answer: parsed by `parse`, then in its range (`check_answer`)."""
+
+    def checked(text: str) -> Any:
+        try:
+            value = parse(text)
+        except (ValueError, argparse.ArgumentTypeError):
+            raise argparse.ArgumentTypeError(f"invalid value {text[:40]!r}; allowed: {_allowed(name)}") from None
+        try:
+            check_answer(name, value)
+        except ValueError as exc:  # InputError is a ValueError
+            message = str(exc).removeprefix(f"{flag(name)}: ")
+            if "range" not in message and "integer in" not in message:
+                message += f" (allowed: {_allowed(name)})"
+            raise argparse.ArgumentTypeError(message) from None
+        return value
+
+    checked.__name__ = getattr(parse, "__name__", "value")
+    return checked
 
 
 # ---------------------------------------------------------------------------------------- prompting

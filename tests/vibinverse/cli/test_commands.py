@@ -97,7 +97,7 @@ def test_seed_reproduces_and_set_overrides(tmp_path):
         (["--set", "surfaces.roof.lobe_width=0"], "surfaces.roof.lobe_width"),
         (["--set", "noise.sigma=nan"], "noise.sigma"),
         (["--set", "noise.sigma"], "dotted.key=value"),
-        (["--seed", "x"], "invalid int value"),
+        (["--seed", "x"], "is not an integer in the allowed range [0, 2^32)"),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, args, message):

@@ -189,3 +189,293 @@ def test_data_files_of_the_corpus_keep_the_contract(tmp_path, path):
     assert_contract(code, err, seconds, [nc, js], set(), tmp_path)
     if path.name.startswith("bad_") or path.suffix == ".nc":
         assert code == 2
+
+
+# ---------------------------------------------------------------- all ten verbs: bad options and bad files
+#
+# Every verb on bad input: exit 2, exactly one stderr line naming the field (and for a number its
+# allowed range), nothing on stdout, no traceback, nothing created or changed under the folder.
+# Refusals are immediate, so the CI examples are many; `-m slow` runs a larger randomized set.
+
+SEED_BAD = st.one_of(st.integers(max_value=-1), st.integers(min_value=2**32))
+
+
+def _ints_outside(lo: int, hi: int):
+    return st.one_of(st.integers(max_value=lo - 1), st.integers(min_value=hi + 1))
+
+
+def _reals_outside(lo: float, hi: float, lo_in: bool = False, hi_in: bool = False):
+    """Finite numbers outside [lo, hi] (an excluded bound itself included), and NaN and infinities."""
+    parts = [st.sampled_from([math.nan, math.inf, -math.inf])]
+    if math.isfinite(lo):
+        parts.append(st.floats(max_value=lo, allow_nan=False, allow_infinity=False, exclude_max=lo_in))
+    if math.isfinite(hi):
+        parts.append(st.floats(min_value=hi, allow_nan=False, allow_infinity=False, exclude_min=hi_in))
+    return st.one_of(*parts)
+
+
+MALFORMED = st.one_of(
+    st.sampled_from(["", " ", "x", "1,2", "0x10", "1e", "--", "1..2", "¹", "1_0_", "\n", "1;rm -rf /"]),
+    st.text(alphabet=st.characters(blacklist_categories=("Nd",)), min_size=1, max_size=8),
+)
+INTEGER_MALFORMED = st.one_of(MALFORMED, st.sampled_from(["1.5", "2e3", "nan", "inf", "1.0"]))
+
+# verb -> (the arguments before the option, {option: strategy of bad values}); the positional
+# arguments are never read (parsing refuses the option first)
+_I, _R = _ints_outside, _reals_outside
+OPTIONS = {
+    "simulate": (
+        ["simulate", "SCENE.toml"],
+        {
+            "--seed": st.one_of(SEED_BAD, INTEGER_MALFORMED),
+            "--video-fps": st.one_of(_R(0, 1e6, hi_in=True), MALFORMED),
+            "--rtol": st.one_of(_R(0, math.inf), MALFORMED),
+        },
+    ),
+    "fit": (
+        ["fit", "DATA.csv"],
+        {
+            "--seed": st.one_of(SEED_BAD, INTEGER_MALFORMED),
+            "--max-steps": st.one_of(_I(1, 10_000_000), INTEGER_MALFORMED),
+            "--workers": st.one_of(_I(1, 1024), INTEGER_MALFORMED),
+            "--modes": st.one_of(_I(0, 6), INTEGER_MALFORMED),
+            "--lines": st.one_of(_I(0, 6), INTEGER_MALFORMED),
+            "--fs": st.one_of(_R(0, math.inf), MALFORMED),
+            "--fps": st.one_of(_R(0, math.inf), MALFORMED),
+            "--scale": st.one_of(_R(0, math.inf), MALFORMED),
+            "--sources": st.one_of(_I(1, 1_000_000), INTEGER_MALFORMED),
+            "--band": st.one_of(MALFORMED, st.sampled_from(["5:2", "-1:3", "nan:3", "1:inf", "3:3"])),
+            "--reference": st.one_of(MALFORMED, st.sampled_from(["-1,2", "1", "1,2,3", "a,b"])),
+        },
+    ),
+    "detect": (
+        ["detect", "CUBE.npy"],
+        {
+            "--alpha": st.one_of(_R(0, 1), MALFORMED),
+            "--max-lines": st.one_of(_I(1, 1000), INTEGER_MALFORMED),
+            "--fps": st.one_of(_R(0, math.inf), MALFORMED),
+            "--workers": st.one_of(_I(1, 1024), INTEGER_MALFORMED),
+            "--memory": st.one_of(st.sampled_from(["0", "-1MB", "x", "1e400", "nan", "2PiB", "1e99"]), MALFORMED),
+            "--band": st.one_of(MALFORMED, st.sampled_from(["5:2", "-1:3", "nan:", ":nan", "3:3"])),
+        },
+    ),
+    "extract": (
+        ["extract", "CUBE.npy"],
+        {
+            "--bin": st.one_of(_I(1, 1_000_000), INTEGER_MALFORMED),
+            "--fps": st.one_of(_R(0, math.inf), MALFORMED),
+            "--line-time": st.one_of(_R(0, math.inf, lo_in=True), MALFORMED),
+            "--chunks": st.one_of(_I(1, 1_000_000), INTEGER_MALFORMED),
+            "--roi": st.one_of(MALFORMED, st.sampled_from(["0:1", "1:0,0:1", "-1:2,0:1"])),
+            "--frames": MALFORMED,
+        },
+    ),
+    "init": (
+        ["init", "--no-input"],
+        {
+            "--latitude": st.one_of(_R(-90, 90, True, True), MALFORMED),
+            "--longitude": st.one_of(_R(-180, 180, True, True), MALFORMED),
+            "--utc-offset": st.one_of(_R(-14, 14, True, True), MALFORMED),
+            "--hour": st.one_of(_R(0, 24, True, True), MALFORMED),
+            "--fs": st.one_of(_R(0, math.inf), MALFORMED),
+            "--duration": st.one_of(_R(0, math.inf), MALFORMED),
+            "--sun-inclination": st.one_of(_R(0, 90, hi_in=True), MALFORMED),
+            "--view-inclination": st.one_of(_R(0, 90, hi_in=True), MALFORMED),
+            "--lobe-width": st.one_of(_R(0, 0.5, hi_in=True), MALFORMED),
+            "--damping-ratio": st.one_of(_R(0, 1, lo_in=True), MALFORMED),
+            "--noise-sigma": st.one_of(_R(0, math.inf, lo_in=True), MALFORMED),
+            "--resolution": st.one_of(st.integers(max_value=0), INTEGER_MALFORMED),
+        },
+    ),
+    "design": (
+        ["design", "SCENE.toml"],
+        {
+            "--threshold": st.one_of(_R(0, math.inf, lo_in=True), MALFORMED),
+            "--pixels": st.one_of(_I(1, 1_000_000), INTEGER_MALFORMED),
+            "--workers": st.one_of(_I(1, 1024), INTEGER_MALFORMED),
+        },
+    ),
+    "bench": (["bench", "--realdata"], {"--workers": st.one_of(_I(1, 1024), INTEGER_MALFORMED)}),
+    "demo": (["demo"], {"--seed": st.one_of(SEED_BAD, INTEGER_MALFORMED)}),
+    "report": (["report", "RESULT.nc"], {"-o": st.just("")}),
+    "study": (["study"], {"": st.sampled_from(["nope", "", "../x", "<script>"])}),
+}
+
+
+@st.composite
+def bad_options(draw):
+    """(verb, option, the command line): one bad value of one option of one verb."""
+    verb = draw(st.sampled_from(sorted(OPTIONS)))
+    head, options = OPTIONS[verb]
+    option = draw(st.sampled_from(sorted(options)))
+    value = draw(options[option])
+    text = value if isinstance(value, str) else repr(value) if isinstance(value, float) else str(value)
+    arg = [text] if not option else [f"{option}={text}"]  # --opt=-1: never read as an option
+    return verb, option, [*head, *arg]
+
+
+def _snapshot(folder: Path) -> dict[str, tuple[int, int]]:
+    """Every path under `folder` with its size and mtime: what a refused run must leave as it was."""
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(folder.rglob("*"))}
+
+
+def _refused(folder: Path, argv: list[str], field: str | None) -> str:
+    """Run `argv` (with -o inside `folder`) and assert the refusal contract; the stderr line."""
+    before = _snapshot(folder)
+    has_output = any(a == "-o" or a.startswith("-o=") for a in argv)
+    out = [] if has_output else ["-o", str(folder / "out")]
+    code, stdout, err, seconds = call(*argv, *out)
+    assert seconds < TIME_LIMIT, f"{seconds:.1f} s"
+    assert "Traceback" not in err, err
+    assert code == 2, (code, argv, err)
+    lines = err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("vibinverse: error: "), (argv, err)
+    assert stdout == "", (argv, stdout)
+    assert _snapshot(folder) == before, f"changed under the folder: {argv}"
+    if field:
+        assert field in lines[0], (field, lines[0])
+    return lines[0]
+
+
+def _check_bad_option(verb: str, option: str, argv: list[str]) -> None:
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        line = _refused(Path(tmp), argv, option if option.startswith("--") else None)
+        if option.startswith("--") and verb != "init":  # a number's line names its allowed range
+            assert any(w in line for w in ("range", "invalid", "allowed", "expected one argument")), line
+
+
+CONTRACT = {"deadline": None, "suppress_health_check": [HealthCheck.function_scoped_fixture, HealthCheck.too_slow]}
+
+
+@settings(**CONTRACT, derandomize=True, max_examples=300)
+@given(bad_options())
+def test_every_verb_refuses_bad_options_in_one_line(case):
+    _check_bad_option(*case)
+
+
+@pytest.mark.slow
+@settings(**CONTRACT, derandomize=False, max_examples=3000)
+@given(bad_options())
+def test_every_verb_refuses_bad_options_in_one_line_randomized(case):
+    _check_bad_option(*case)
+
+
+# bad files: verb -> (the arguments with FILE for the bad file, the suffixes it is given)
+FILE_VERBS = {
+    "simulate": (["simulate", "FILE"], [".toml"]),
+    "simulate --image": (["simulate", "FILE", "--image", "2,2"], [".toml"]),
+    "design": (["design", "FILE"], [".toml"]),
+    "fit": (["fit", "FILE", "--method", "spectral"], [".csv", ".npy", ".npz", ".nc", ".tsv"]),
+    "fit --scene": (["fit", "DATA", "--scene", "FILE"], [".toml"]),
+    "fit --pixels": (["fit", "FILE", "--pixels", "all"], [".npy", ".nc", ".mp4"]),
+    "detect": (["detect", "FILE"], [".npy", ".nc", ".mp4", ".csv"]),
+    "extract": (["extract", "FILE"], [".npy", ".nc", ".mp4", ".tif"]),
+    "extract --mask": (["extract", "CUBE", "--mask", "FILE"], [".npy", ".png"]),
+    "report": (["report", "FILE"], [".nc", ".csv", ".toml"]),
+}
+
+
+def _valid_bytes(suffix: str, folder: Path) -> bytes:
+    """A small valid file of the format, to be truncated."""
+    import xarray as xr
+
+    p = folder / f"valid{suffix}"
+    cube = np.arange(2 * 3 * 4, dtype=np.float64).reshape(2, 3, 4)
+    if suffix == ".npy":
+        np.save(p, cube)
+    elif suffix == ".npz":
+        np.savez(p, time=np.arange(8) / 10, intensity=np.ones(8))
+    elif suffix == ".nc":
+        xr.Dataset({"intensity": (("time", "y", "x"), cube)}, coords={"time": [0.0, 0.1]}).to_netcdf(
+            p, engine="h5netcdf"
+        )
+    elif suffix == ".toml":
+        p.write_bytes(Path(ROOF).read_bytes())
+    else:
+        p.write_text("time,intensity\n" + "".join(f"{i / 10},{i % 3}\n" for i in range(8)))
+    data = p.read_bytes()
+    p.unlink()
+    return data
+
+
+@st.composite
+def bad_files(draw):
+    """(verb, the command line with FILE, suffix, kind, the file's bytes or a recipe)."""
+    verb = draw(st.sampled_from(sorted(FILE_VERBS)))
+    argv, suffixes = FILE_VERBS[verb]
+    suffix = draw(st.sampled_from(suffixes))
+    kind = draw(st.sampled_from(["empty", "truncated", "garbage", "text"]))
+    if kind == "garbage":
+        payload = b"\x00\xff\xfe" + draw(st.binary(max_size=200))
+    elif kind == "text":
+        payload = draw(st.sampled_from([b"hello", b"<script>alert(1)</script>\n", b"=1+1,@x\n-1,+2\n", b"[[[\n"]))
+    else:
+        payload = draw(st.floats(0.05, 0.6))  # the fraction of a valid file kept
+    return verb, argv, suffix, kind, payload
+
+
+def _check_bad_file(verb, argv, suffix, kind, payload) -> None:
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        if kind == "empty":
+            data = b""
+        elif kind == "truncated":
+            valid = _valid_bytes(suffix, folder)
+            data = valid[: max(1, int(len(valid) * payload))]
+        else:
+            data = payload
+        bad = folder / f"in{suffix}"
+        bad.write_bytes(data)
+        (folder / "data.csv").write_text("time,intensity\n" + "".join(f"{i / 100},{287 + i % 3}\n" for i in range(64)))
+        np.save(folder / "cube.npy", np.ones((4, 3, 3)))
+        names = {"FILE": str(bad), "DATA": str(folder / "data.csv"), "CUBE": str(folder / "cube.npy")}
+        _refused(folder, [names.get(a, a) for a in argv], None)
+
+
+@settings(**CONTRACT, derandomize=True, max_examples=150)
+@given(bad_files())
+def test_every_verb_refuses_bad_files_in_one_line(case):
+    _check_bad_file(*case)
+
+
+@pytest.mark.slow
+@settings(**CONTRACT, derandomize=False, max_examples=1500)
+@given(bad_files())
+def test_every_verb_refuses_bad_files_in_one_line_randomized(case):
+    _check_bad_file(*case)
+
+
+# ---------------------------------------------------------------- user text written into outputs
+
+TEXTS = st.one_of(
+    st.sampled_from(["V\n1,2", "a\r\nb", "x\u2028y", "=cmd|' /C calc'!A0", "<script>alert(1)</script>", "\x85"]),
+    st.text(max_size=20),
+)
+
+
+@settings(**CONTRACT, derandomize=True, max_examples=15)
+@given(units=TEXTS, name=st.sampled_from(["a\nb.nc", "=x.nc", "<b>.nc", "plain.nc", "a\rb\u2028.nc"]))
+def test_extract_keeps_user_text_inside_the_csv_comments(units, name):
+    """A units attribute or a file name holding a line break stays in its '#' comment line: every
+    other line of series.csv is the header or a row of numbers."""
+    import tempfile
+
+    import xarray as xr
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / name
+        cube = np.arange(4 * 2 * 2, dtype=np.float64).reshape(4, 2, 2)
+        ds = xr.Dataset({"intensity": (("time", "y", "x"), cube, {"units": units})}, coords={"time": np.arange(4) / 10})
+        ds.to_netcdf(src, engine="h5netcdf")
+        out = Path(tmp) / "out"
+        code, _, err, _ = call("extract", str(src), "--series", "region", "-o", str(out))
+        assert code == 0, err
+        lines = (out / "series.csv").read_text(encoding="utf-8").split("\n")
+        body = [ln for ln in lines if ln and not ln.startswith("#")]
+        assert body[0] == "time,intensity", lines
+        assert all(len(row.split(",")) == 2 and all(np.isfinite(float(v)) for v in row.split(",")) for row in body[1:])
+        assert not any(c in "".join(lines) for c in "\r\u2028\x85")

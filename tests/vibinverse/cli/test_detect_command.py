@@ -132,10 +132,10 @@ def test_detect_on_a_dask_cluster_gives_the_same_lines(cube_nc, tmp_path):
     [
         (["--band", "40:30"], "--band: 40:30 is not a band; allowed 0 <= fmin < fmax <= 50 Hz (Nyquist)"),
         (["--band", "1-2"], "argument --band: invalid band '1-2' (fmin:fmax in Hz"),
-        (["--alpha", "1.5"], "--alpha: 1.5 is not a probability in (0, 1)"),
+        (["--alpha", "1.5"], "--alpha: 1.5 is outside the allowed range (0, 1)"),
         (["--memory", "lots"], "argument --memory: invalid size 'lots'"),
         (["--memory", "1kB", "--workers", "2"], "--memory: 0.98 kiB is too little for 2 thread(s)"),
-        (["--workers", "0"], "--workers: 0 is not a number of threads"),
+        (["--workers", "0"], "--workers: 0 is outside the allowed range [1, 1024]"),
         (["--channel", "x"], "argument --channel: invalid choice"),
     ],
 )

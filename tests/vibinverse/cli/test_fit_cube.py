@@ -115,7 +115,7 @@ def test_fit_a_mask_and_a_detection_cluster_with_a_reference_pixel(tmp_path, cub
         (lambda d: ["--pixels", "all", "--reference", "7,7"], "reference: pixel (7, 7) is not among the selected"),
         (lambda d: ["--displacement", "x"], "--displacement: applies to a cube fit; give --pixels"),
         (lambda d: ["--pixels", "all", "--band", "3-5"], "invalid band '3-5'"),
-        (lambda d: ["--pixels", "all", "--sources", "0"], "sources: 0; allowed: an integer in [1, 6]"),
+        (lambda d: ["--pixels", "all", "--sources", "0"], "--sources: 0 is outside the allowed range [1, 1000000]"),
         (lambda d: ["--pixels", "all", "--sources", "7"], "sources: 7; allowed: an integer in [1, 6]"),
         (lambda d: ["--sources", "2"], "--sources: applies to a cube fit; give --pixels"),
     ],
