@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from vibinverse.errors import InputError
-from vibinverse.io.scene_template import _RANGES, SceneAnswers, check_answer, flag, scene_template
+from vibinverse.io.scene_template import ANSWER_RANGES, SceneAnswers, check_answer, flag, scene_template
 
 logger = logging.getLogger("vibinverse")
 
@@ -80,47 +80,60 @@ def add_init_parser(sub: Any, parents: list) -> None:
         "terminal, else take their defaults.",
     )
     g = p.add_argument_group("observation")
-    g.add_argument("--title", help=f"free text shown in plots (default: {defaults.title!r})")
+    _arg(g, "--title", help=f"free text shown in plots (default: {defaults.title!r})")
     sun = p.add_argument_group("sun: by date, time and place, or by angles")
-    sun.add_argument("--date", metavar="YYYY-MM-DD", help="local date of the observation")
-    sun.add_argument(
-        "--hour", type=_hour, metavar="H", help="local clock time of the record's middle: 13.5 or 13:30, in [0, 24]"
+    _arg(sun, "--date", metavar="YYYY-MM-DD", help="local date of the observation")
+    _arg(
+        sun,
+        "--hour",
+        type=_hour,
+        metavar="H",
+        help="local clock time of the record's middle: 13.5 or 13:30, in [0, 24]",
     )
-    sun.add_argument("--latitude", type=float, metavar="DEG", help="of the building, degrees north, in [-90, 90]")
-    sun.add_argument("--longitude", type=float, metavar="DEG", help="of the building, degrees east, in [-180, 180]")
-    sun.add_argument(
-        "--utc-offset", type=float, metavar="H", help="local clock time = UTC + offset, hours in [-14, 14] (default 0)"
+    _arg(sun, "--latitude", type=float, metavar="DEG", help="of the building, degrees north, in [-90, 90]")
+    _arg(sun, "--longitude", type=float, metavar="DEG", help="of the building, degrees east, in [-180, 180]")
+    _arg(
+        sun,
+        "--utc-offset",
+        type=float,
+        metavar="H",
+        help="local clock time = UTC + offset, hours in [-14, 14] (default 0)",
     )
-    sun.add_argument(
+    _arg(
+        sun,
         "--sun-inclination",
         type=float,
         metavar="DEG",
         help="instead of a date: the sun's elevation above the horizon, degrees in (0, 90] (default 60)",
     )
-    sun.add_argument(
+    _arg(
+        sun,
         "--sun-azimuth",
         type=float,
         metavar="DEG",
         help="the sun's azimuth, degrees counter-clockwise from east (a compass bearing B is 90 - B; default 180)",
     )
     view = p.add_argument_group("sensor")
-    view.add_argument(
+    _arg(
+        view,
         "--view-inclination",
         type=float,
         metavar="DEG",
         help="the sensor's elevation seen from the roof, degrees in (0, 90]: 90 = straight down (nadir), a view "
         "zenith angle Z is 90 - Z (default: 0.01 rad above the sun's mirror direction, the specular lobe)",
     )
-    view.add_argument(
+    _arg(
+        view,
         "--view-azimuth",
         type=float,
         metavar="DEG",
         help="direction from the roof to the sensor, degrees counter-clockwise from east (a compass bearing B is "
         "90 - B; default: opposite the sun)",
     )
-    view.add_argument("--fs", type=float, metavar="HZ", help=f"frame rate, Hz (default {defaults.fs:g})")
-    view.add_argument("--duration", type=float, metavar="S", help=f"record length, s (default {defaults.duration:g})")
-    view.add_argument(
+    _arg(view, "--fs", type=float, metavar="HZ", help=f"frame rate, Hz (default {defaults.fs:g})")
+    _arg(view, "--duration", type=float, metavar="S", help=f"record length, s (default {defaults.duration:g})")
+    _arg(
+        view,
         "--footprint",
         type=float,
         nargs="+",
@@ -128,45 +141,58 @@ def add_init_parser(sub: Any, parents: list) -> None:
         help="the pixel's footprint on the ground, m: one size (a square) or east-west and north-south "
         f"(default {defaults.footprint[0]:g})",
     )
-    view.add_argument(
-        "--resolution", type=int, metavar="N", help=f"subpixels per footprint side (default {defaults.resolution})"
+    _arg(
+        view,
+        "--resolution",
+        type=int,
+        metavar="N",
+        help=f"subpixels per footprint side (default {defaults.resolution})",
     )
     roof = p.add_argument_group("roof")
-    roof.add_argument(
+    _arg(
+        roof,
         "--roof",
         type=float,
         nargs="+",
         metavar="M",
         help=f"roof size, m: one size (a square) or east-west and north-south (default {defaults.roof[0]:g})",
     )
-    roof.add_argument(
+    _arg(
+        roof,
         "--material",
         metavar="NAME",
         help=f"roof material: aluminium, glass, glass_paper, ground, steel (default {defaults.material})",
     )
-    roof.add_argument(
-        "--background", metavar="NAME", help=f"what the footprint sees around the roof (default {defaults.background})"
+    _arg(
+        roof,
+        "--background",
+        metavar="NAME",
+        help=f"what the footprint sees around the roof (default {defaults.background})",
     )
-    roof.add_argument(
+    _arg(
+        roof,
         "--lobe-width",
         type=float,
         metavar="RAD",
         help=f"RMS facet slope of the roof, rad in (0, 0.5] (default {defaults.lobe_width:g})",
     )
     motion = p.add_argument_group("motion (guesses: fit estimates them)")
-    motion.add_argument(
+    _arg(
+        motion,
         "--resonance",
         type=float,
         metavar="HZ",
         help=f"expected tilt resonance of the building, Hz in (0, fs/2) (default {defaults.resonance:g})",
     )
-    motion.add_argument(
+    _arg(
+        motion,
         "--damping-ratio",
         type=float,
         metavar="ZETA",
         help=f"expected damping ratio of the tilt mode, in [0, 1) (default {defaults.damping_ratio:g})",
     )
-    motion.add_argument(
+    _arg(
+        motion,
         "--drive",
         type=float,
         nargs="*",
@@ -174,50 +200,61 @@ def add_init_parser(sub: Any, parents: list) -> None:
         help="expected drive lines (machinery), Hz each in (0, fs/2); --drive alone: none "
         f"(default {' '.join(f'{f:g}' for f in defaults.drive)})",
     )
-    motion.add_argument(
+    _arg(
+        motion,
         "--drive-amplitude",
         type=float,
         metavar="M",
         help=f"expected drive amplitude at the corner's base, m (default {defaults.drive_amplitude:g})",
     )
-    motion.add_argument(
+    _arg(
+        motion,
         "--base-noise",
         type=float,
         metavar="M",
         help=f"expected RMS white base motion at each corner, m (default {defaults.base_noise:g})",
     )
-    motion.add_argument(
+    _arg(
+        motion,
         "--noise-sigma",
         type=float,
         metavar="SIGMA",
         help="sensor noise sd in the data's units, if known (default: unknown, 0 in the file; fit estimates it)",
     )
     out = p.add_argument_group("output")
-    out.add_argument(
-        "-o", "--output", default=".", metavar="DIR", help=f"output directory (default: .); writes {SCENE_NAME}"
-    )
-    out.add_argument("--force", action="store_true", help=f"replace an existing DIR/{SCENE_NAME}")
-    out.add_argument(
+    _arg(out, "-o", "--output", default=".", metavar="DIR", help=f"output directory (default: .); writes {SCENE_NAME}")
+    _arg(out, "--force", action="store_true", help=f"replace an existing DIR/{SCENE_NAME}")
+    _arg(
+        out,
         "--json",
         action="store_true",
         help='print {"scene": PATH, "paths": [PATH]} as one JSON document on stdout (the log goes to stderr)',
     )
     asking = out.add_mutually_exclusive_group()
-    asking.add_argument(
-        "--interactive", action="store_true", help="ask for every answer not given (also when stdin is not a terminal)"
+    _arg(
+        asking,
+        "--interactive",
+        action="store_true",
+        help="ask for every answer not given (also when stdin is not a terminal)",
     )
-    asking.add_argument("--no-input", action="store_true", help="never ask: answers not given take their defaults")
+    _arg(asking, "--no-input", action="store_true", help="never ask: answers not given take their defaults")
     p.set_defaults(func=cmd_init)
-    for action in p._actions:  # numbers checked against their ranges at parse time (one line, exit 2)
-        if action.dest in _RANGES or action.dest == "resolution":
-            action.type = _checked(action.dest, action.type or str)
+
+
+def _arg(group: Any, *flags: str, **kwargs: Any) -> argparse.Action:
+    """`group.add_argument(*flags, **kwargs)`; a numeric answer's value is checked against its range
+    at parse time (`_checked`: one line, exit 2)."""
+    action = group.add_argument(*flags, **kwargs)
+    if action.dest in ANSWER_RANGES or action.dest == "resolution":
+        action.type = _checked(action.dest, action.type or str)
+    return action
 
 
 def _allowed(name: str) -> str:
     """The allowed range of a numeric answer, as the messages write it."""
-    if name not in _RANGES:
+    if name not in ANSWER_RANGES:
         return "an integer in [1, 4096]"  # resolution (`check_answer`)
-    lo, hi, lo_open, hi_open = _RANGES[name]
+    lo, hi, lo_open, hi_open = ANSWER_RANGES[name]
     return f"the range {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
 
 

@@ -156,7 +156,7 @@ def _material(field: str, value: object) -> str:
 
 
 # (lo, hi, lo_open, hi_open) of each numeric answer; resonance and drive lie in (0, fs/2)
-_RANGES: dict[str, tuple[float, float, bool, bool]] = {
+ANSWER_RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "hour": (0.0, 24.0, False, False),
     "latitude": (-90.0, 90.0, False, False),
     "longitude": (-180.0, 180.0, False, False),
@@ -181,8 +181,8 @@ def check_answer(field: str, value: object, fs: float | None = None) -> object:
     answer's flag and its allowed range. (`scene_template` also checks the answers together.)"""
     if value is None:
         return None
-    if field in _RANGES:
-        lo, hi, lo_open, hi_open = _RANGES[field]
+    if field in ANSWER_RANGES:
+        lo, hi, lo_open, hi_open = ANSWER_RANGES[field]
         return _real(field, value, lo, hi, lo_open=lo_open, hi_open=hi_open)
     if field in ("resonance", "drive"):
         nyq = (SceneAnswers.fs if fs is None else fs) / 2
