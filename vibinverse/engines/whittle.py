@@ -38,37 +38,70 @@ _LOG_2PI = math.log(2.0 * math.pi)
 def spectral_density(cw, sw, c, diff, phi, q, h, r, starts, sizes, out):  # pragma: no cover - compiled
     """The series' spectral density f(w) (diff 0), or its first differences' c(w) f(w) (diff 1), at
     each ordinate (cw = cos w, sw = sin w, c = 4 sin^2(w / 2)), written into `out`; blocks of 1 or
-    2 states start at `starts` (sizes)."""
-    for j in range(cw.shape[0]):
-        g = c[j] if diff else 1.0
-        acc = r * g
-        for b in range(starts.shape[0]):
-            o = starts[b]
-            if sizes[b] == 1:
-                p = phi[o, o]
-                if h[o] == 0.0 or (p == 1.0 and c[j] == 0.0):  # unseen, or a walk at zero frequency
-                    continue
-                # |z - p|^2 = (1 - p)^2 + p c: a walk (p = 1) gives c / c = 1 without cancelling
-                acc += h[o] * h[o] * q[o, o] * g / ((1.0 - p) * (1.0 - p) + p * c[j])
-            else:
-                h1, h2 = h[o], h[o + 1]
-                if h1 == 0.0 and h2 == 0.0:
-                    continue
-                a11, a12, a21, a22 = phi[o, o], phi[o, o + 1], phi[o + 1, o], phi[o + 1, o + 1]
-                # M = zI - Phi; h M^{-1} = (n1, n2) / det with n1 = h1 M22 - h2 M21, n2 = h2 M11 - h1 M12
-                m11r, m11i = cw[j] - a11, sw[j]
-                m22r, m22i = cw[j] - a22, sw[j]
-                n1r, n1i = h1 * m22r + h2 * a21, h1 * m22i
-                n2r, n2i = h2 * m11r + h1 * a12, h2 * m11i
-                detr = m11r * m22r - m11i * m22i - a12 * a21
-                deti = m11r * m22i + m11i * m22r
+    2 states start at `starts` (sizes). Block by block, each over every ordinate (a loop the compiler
+    vectorizes: 3x faster than ordinate by ordinate)."""
+    nj = cw.shape[0]
+    for j in range(nj):
+        out[j] = r * (c[j] if diff else 1.0)
+    for b in range(starts.shape[0]):
+        o = starts[b]
+        if sizes[b] == 1:
+            p, hq = phi[o, o], h[o] * h[o] * q[o, o]
+            if hq == 0.0:
+                continue
+            one_p2 = (1.0 - p) * (1.0 - p)
+            for j in range(nj):
+                den = one_p2 + p * c[j]  # |z - p|^2: a walk (p = 1) gives c / c = 1 without cancelling
+                if den > 0.0:  # 0 only for a walk at zero frequency, where it has no density
+                    out[j] += hq * (c[j] if diff else 1.0) / den
+        else:
+            h1, h2 = h[o], h[o + 1]
+            if h1 == 0.0 and h2 == 0.0:
+                continue
+            a11, a12, a21, a22 = phi[o, o], phi[o, o + 1], phi[o + 1, o], phi[o + 1, o + 1]
+            q11, q12, q22 = q[o, o], q[o, o + 1], q[o + 1, o + 1]
+            # M = zI - Phi; h M^{-1} = (n1, n2) / det with n1 = h1 M22 - h2 M21, n2 = h2 M11 - h1 M12
+            for j in range(nj):
+                m11r, m22r, mi = cw[j] - a11, cw[j] - a22, sw[j]
+                n1r, n1i = h1 * m22r + h2 * a21, h1 * mi
+                n2r, n2i = h2 * m11r + h1 * a12, h2 * mi
+                detr = m11r * m22r - mi * mi - a12 * a21
+                deti = (m11r + m22r) * mi
                 num = (
-                    q[o, o] * (n1r * n1r + n1i * n1i)
-                    + q[o + 1, o + 1] * (n2r * n2r + n2i * n2i)
-                    + 2.0 * q[o, o + 1] * (n1r * n2r + n1i * n2i)
+                    q11 * (n1r * n1r + n1i * n1i) + q22 * (n2r * n2r + n2i * n2i) + 2.0 * q12 * (n1r * n2r + n1i * n2i)
                 )
-                acc += g * num / (detr * detr + deti * deti)
-        out[j] = acc
+                out[j] += (c[j] if diff else 1.0) * num / (detr * detr + deti * deti)
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def minus_sinusoids(spec, m, diff, nu, amp, theta, out):  # pragma: no cover - compiled
+    """|spec_j - S_j|^2 / m into `out`: spec the transform (ordinates j = 1 ..) of the record (diff 0)
+    or of its differences (diff 1), S_j the same transform of the sinusoids A cos(theta + nu k),
+    k = 0 .. n - 1 (nu in radians per sample, theta the phase at the first sample), in closed form:
+    sum_k e^{i D k} = e^{i D (m - 1) / 2} sin(m D / 2) / sin(D / 2) (m where sin(D / 2) = 0), D the
+    line's offset from the ordinate; a difference multiplies a line's e^{i nu k} by (e^{i nu} - 1)."""
+    for j in range(spec.shape[0]):
+        wj = 2.0 * math.pi * (j + 1) / m
+        sr, si = spec[j].real, spec[j].imag
+        for ell in range(nu.shape[0]):
+            for sign in (1.0, -1.0):  # cos = (e^{i(.)} + e^{-i(.)}) / 2
+                d = sign * nu[ell] - wj
+                half = math.sin(0.5 * d)
+                if abs(half) < 1e-12:
+                    gr, gi = float(m), 0.0
+                else:
+                    mag = math.sin(0.5 * m * d) / half
+                    ang = 0.5 * d * (m - 1)
+                    gr, gi = mag * math.cos(ang), mag * math.sin(ang)
+                # the line's coefficient (A / 2) e^{i sign theta}, times (e^{i sign nu} - 1) differenced
+                cr = 0.5 * amp[ell] * math.cos(sign * theta[ell])
+                ci = 0.5 * amp[ell] * math.sin(sign * theta[ell])
+                if diff:
+                    er, ei = math.cos(sign * nu[ell]) - 1.0, math.sin(sign * nu[ell])
+                    cr, ci = cr * er - ci * ei, cr * ei + ci * er
+                sr -= cr * gr - ci * gi
+                si -= cr * gi + ci * gr
+        out[j] = (sr * sr + si * si) / m
 
 
 @njit(cache=True, fastmath=False, nogil=True)
@@ -86,27 +119,63 @@ def whittle_sum(power, density, nyquist):  # pragma: no cover - compiled
     return acc
 
 
+def fast_length(m: int) -> int:
+    """The largest length <= m whose only prime factors are 2, 3, 5, 7 and 11 (the FFT's own radices):
+    the values beyond it, at most ~0.2 % of a long record, are left out (a prime length takes the
+    FFT 7-10x longer: 305 ms against 46 ms at 720,000 samples)."""
+    k = int(m)
+    while k > 1:
+        r = k
+        for p in (2, 3, 5, 7, 11):
+            while r % p == 0:
+                r //= p
+        if r == 1:
+            return k
+        k -= 1
+    return max(k, 1)
+
+
 class Periodogram:
     """The periodogram of a uniform record of n samples (`differences` 0), or of its first
     differences (1: a model with a random walk), at the Fourier frequencies j = 1 .. m / 2 of its
-    m = n - differences values (`Periodogram.of`), and the likelihood under a model's tables."""
+    first m values (m = `fast_length`(n - differences)) (`Periodogram.of`), and the likelihood
+    under a model's tables."""
 
     def __init__(self, n: int, differences: int):
         if differences not in (0, 1):
             raise ValueError(f"differences: {differences}; allowed: 0 or 1")
         self.differences = differences
-        self.m = int(n) - differences
+        self.m = fast_length(int(n) - differences)
         j = np.arange(1, self.m // 2 + 1)
         w = 2.0 * np.pi * j / self.m
         self.cw, self.sw = np.cos(w), np.sin(w)
         self.c = 4.0 * np.sin(0.5 * w) ** 2
         self.nyquist = self.m % 2 == 0
 
+    def transform(self, y: np.ndarray) -> np.ndarray:
+        """The discrete Fourier transform of y (length n), or of its first differences, at the
+        ordinates j = 1 .. m / 2."""
+        d = np.diff(np.asarray(y, dtype=float)) if self.differences else np.asarray(y, dtype=float)
+        return np.fft.rfft(d[: self.m])[1 : self.m // 2 + 1]
+
     def of(self, y: np.ndarray) -> np.ndarray:
         """I_j of y (length n), or of its first differences."""
-        d = np.diff(np.asarray(y, dtype=float)) if self.differences else np.asarray(y, dtype=float)
-        spec = np.fft.rfft(d)[1 : self.m // 2 + 1]
+        spec = self.transform(y)
         return (spec.real**2 + spec.imag**2) / self.m
+
+    def without_sinusoids(
+        self, spec: np.ndarray, nu: np.ndarray, amplitude: np.ndarray, phase: np.ndarray
+    ) -> np.ndarray:
+        """I_j of the record less the sinusoids A cos(phase + nu k) (nu radians per sample, the phase
+        at the first sample), from the record's `transform` without another FFT: O(lines) a
+        ordinate (`minus_sinusoids`), ~10x cheaper than the FFT of a 720,000-sample record for one
+        line."""
+        out = np.empty(spec.size)
+        minus_sinusoids(
+            spec, self.m, self.differences, np.asarray(nu, float), np.asarray(amplitude, float),
+            np.asarray(phase, float), out,
+        )  # fmt: skip
+        return out
 
     def log_likelihood(
         self,
