@@ -47,7 +47,10 @@ def _roi(text: str) -> tuple[int, int, int, int]:
     m = re.fullmatch(r"\s*(\d+)\s*:\s*(\d+)\s*,\s*(\d+)\s*:\s*(\d+)\s*", text)
     if not m:
         raise argparse.ArgumentTypeError(f"invalid region {text!r} (x0:x1,y0:y1, pixel indices, half-open)")
-    return tuple(int(g) for g in m.groups())  # type: ignore[return-value]
+    x0, x1, y0, y1 = (int(g) for g in m.groups())
+    if not (x0 < x1 and y0 < y1):
+        raise argparse.ArgumentTypeError(f"empty region {text!r}; allowed: x0:x1,y0:y1 with x0 < x1 and y0 < y1")
+    return x0, x1, y0, y1
 
 
 def _frames(text: str) -> slice:

@@ -341,7 +341,13 @@ def _check_bad_option(verb: str, option: str, argv: list[str]) -> None:
     import tempfile
 
     with tempfile.TemporaryDirectory() as tmp:
-        line = _refused(Path(tmp), argv, option if option.startswith("--") else None)
+        line = _refused(Path(tmp), argv, None)
+        if "input: file not found" in line:
+            # the command's input file does not exist either: an option whose check needs the data
+            # (a band against the Nyquist frequency) is refused after it, and naming it is right
+            return
+        if option.startswith("--"):
+            assert option in line, (option, line)
         if option.startswith("--") and verb != "init":  # a number's line names its allowed range
             assert any(w in line for w in ("range", "invalid", "allowed", "expected one argument")), line
 
@@ -356,7 +362,7 @@ def test_every_verb_refuses_bad_options_in_one_line(case):
 
 
 @pytest.mark.slow
-@settings(**CONTRACT, derandomize=False, max_examples=3000)
+@settings(**CONTRACT, derandomize=False, max_examples=600)
 @given(bad_options())
 def test_every_verb_refuses_bad_options_in_one_line_randomized(case):
     _check_bad_option(*case)
