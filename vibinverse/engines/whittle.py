@@ -74,37 +74,6 @@ def spectral_density(cw, sw, c, diff, phi, q, h, r, starts, sizes, out):  # prag
 
 
 @njit(cache=True, fastmath=False, nogil=True)
-def minus_sinusoids(spec, m, diff, nu, amp, theta, out):  # pragma: no cover - compiled
-    """|spec_j - S_j|^2 / m into `out`: spec the transform (ordinates j = 1 ..) of the record (diff 0)
-    or of its differences (diff 1), S_j the same transform of the sinusoids A cos(theta + nu k),
-    k = 0 .. n - 1 (nu in radians per sample, theta the phase at the first sample), in closed form:
-    sum_k e^{i D k} = e^{i D (m - 1) / 2} sin(m D / 2) / sin(D / 2) (m where sin(D / 2) = 0), D the
-    line's offset from the ordinate; a difference multiplies a line's e^{i nu k} by (e^{i nu} - 1)."""
-    for j in range(spec.shape[0]):
-        wj = 2.0 * math.pi * (j + 1) / m
-        sr, si = spec[j].real, spec[j].imag
-        for ell in range(nu.shape[0]):
-            for sign in (1.0, -1.0):  # cos = (e^{i(.)} + e^{-i(.)}) / 2
-                d = sign * nu[ell] - wj
-                half = math.sin(0.5 * d)
-                if abs(half) < 1e-12:
-                    gr, gi = float(m), 0.0
-                else:
-                    mag = math.sin(0.5 * m * d) / half
-                    ang = 0.5 * d * (m - 1)
-                    gr, gi = mag * math.cos(ang), mag * math.sin(ang)
-                # the line's coefficient (A / 2) e^{i sign theta}, times (e^{i sign nu} - 1) differenced
-                cr = 0.5 * amp[ell] * math.cos(sign * theta[ell])
-                ci = 0.5 * amp[ell] * math.sin(sign * theta[ell])
-                if diff:
-                    er, ei = math.cos(sign * nu[ell]) - 1.0, math.sin(sign * nu[ell])
-                    cr, ci = cr * er - ci * ei, cr * ei + ci * er
-                sr -= cr * gr - ci * gi
-                si -= cr * gi + ci * gr
-        out[j] = (sr * sr + si * si) / m
-
-
-@njit(cache=True, fastmath=False, nogil=True)
 def whittle_sum(power, density, nyquist):  # pragma: no cover - compiled
     """-sum_j [log f_j + I_j / f_j] with weight 1/2 on the last ordinate when it is the Nyquist one;
     -inf at a density <= 0 (a model that cannot produce the data)."""
@@ -162,19 +131,6 @@ class Periodogram:
         """I_j of y (length n), or of its first differences."""
         spec = self.transform(y)
         return (spec.real**2 + spec.imag**2) / self.m
-
-    def without_sinusoids(
-        self, spec: np.ndarray, nu: np.ndarray, amplitude: np.ndarray, phase: np.ndarray
-    ) -> np.ndarray:
-        """I_j of the record less the sinusoids A cos(phase + nu k) (nu radians per sample, the phase
-        at the first sample), from the record's `transform` without another FFT: O(lines) an
-        ordinate (`minus_sinusoids`); one line costs about what the FFT of a fast length does."""
-        out = np.empty(spec.size)
-        minus_sinusoids(
-            spec, self.m, self.differences, np.asarray(nu, float), np.asarray(amplitude, float),
-            np.asarray(phase, float), out,
-        )  # fmt: skip
-        return out
 
     def log_likelihood(
         self,

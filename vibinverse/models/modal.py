@@ -306,13 +306,11 @@ def _lines_mean(t, level, f, a, ph, out):  # pragma: no cover - compiled
         out[k] = acc
 
 
-def whittle_engine(series: Series, gain: bool, integrated: bool) -> Periodogram | None:
+def whittle_engine(series: Series, gaps: bool, gain: bool, integrated: bool) -> Periodogram | None:
     """Whittle's engine (on the record's first differences) for a long uniform record without gaps,
     for a model without a gain drift or an integrated walk; None: the Kalman filter's exact
     likelihood. Long: at least `WHITTLE_MIN_SAMPLES` samples."""
-    if not series.uniform or gain or integrated or series.time.size < WHITTLE_MIN_SAMPLES:
-        return None
-    if not bool(np.all(np.isfinite(series.intensity))):
+    if not series.uniform or gaps or gain or integrated or series.time.size < WHITTLE_MIN_SAMPLES:
         return None
     return Periodogram(series.time.size, 1)
 
@@ -505,7 +503,9 @@ class ModalModel(SignalModel):
         """Whittle's engine for this model's record (`whittle_engine`; None: the Kalman filter's),
         with its caches emptied: the differences' periodogram without lines, the leading samples
         that carry the level and their mean (`_whittle`)."""
-        self.spectral = whittle_engine(self.series, bool(self.spec.gain), bool(np.any(self.kinds == _IWALK)))
+        self.spectral = whittle_engine(
+            self.series, not bool(self.good.all()), bool(self.spec.gain), bool(np.any(self.kinds == _IWALK))
+        )
         self._power: np.ndarray | None = None
         self._level_window: int | None = None
         self._leading: tuple[int, float] | None = None

@@ -130,24 +130,6 @@ def test_modal_model_uses_whittle_on_long_uniform_records_and_it_tracks_the_filt
     assert ModalModel({"modal": {"modes": 1}}, gappy).spectral is None
 
 
-@pytest.mark.parametrize("differences", [0, 1])
-@pytest.mark.parametrize("n", [4096, 4097])
-def test_sinusoids_leave_the_transform_in_closed_form(differences, n):
-    """The periodogram of a record less sinusoids, from the record's transform and the lines' closed
-    form, equals the FFT of the difference: off-grid, on an ordinate, near Nyquist and near zero."""
-    rng = np.random.default_rng(5)
-    y = rng.normal(size=n)
-    k = np.arange(n)
-    nu = np.array([0.3137, 2 * math.pi * 100 / fast_length(n - differences), 3.1, 0.002])
-    amp = np.array([1.5, 0.7, 0.2, 3.0])
-    phase = np.array([0.4, -2.0, 1.1, 0.0])
-    lines = (amp[:, None] * np.cos(phase[:, None] + nu[:, None] * k)).sum(axis=0)
-    pg = Periodogram(n, differences)
-    direct = pg.of(y - lines)
-    fast = pg.without_sinusoids(pg.transform(y), nu, amp, phase)
-    assert np.allclose(fast, direct, rtol=1e-9, atol=1e-9 * direct.max())
-
-
 def test_fast_length_drops_little_and_has_small_factors():
     for m in (719_999, 131_071, 53_999, 4096, 7, 1):
         k = fast_length(m)
