@@ -122,7 +122,11 @@ def line_detection(posterior: Posterior, values: dict[str, float]) -> dict[str, 
     or None) and `{label}_null_refitted` of every line of the fit at `values`. The gain is first
     taken with every other parameter held at `values` (an upper bound of the refitted gain); where
     that would claim the line, or give a false-alarm probability below REFIT_BELOW, the null is
-    refitted (`null_optimum`) and the gain is ln L(values) minus the null's maximum."""
+    refitted (`null_optimum`) and the gain is ln L(values) minus the null's maximum. Made once per
+    point (`Posterior.line_tests`): a refit of a long record's null takes seconds per line."""
+    key = tuple(sorted((k, float(v)) for k, v in values.items()))
+    if key in posterior.line_tests:
+        return dict(posterior.line_tests[key])
     model = posterior.model
     ll = model.log_likelihood(values)
     out: dict[str, Any] = {}
@@ -145,4 +149,5 @@ def line_detection(posterior: Posterior, values: dict[str, float]) -> dict[str, 
                 f"{test.label}_null_refitted": refit,
             }
         )
+    posterior.line_tests[key] = dict(out)
     return out

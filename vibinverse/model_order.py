@@ -78,7 +78,9 @@ line that gains POSSIBLE_GAIN (4.5, a 1.1 % tail) + ln M_near but is not kept is
 ambiguous with the resonance's values it implies, and `vi.fit` adds that order's 90 % intervals.
 It stops when nothing changes, or at the caps (6 modes, 6 lines). A component the user fixes
 (`modes`, `lines`, `drift`, `noise` or `gain` in the `modal` table) is not searched; the white
-noise is searched only with the coloured noise (and not when `white` is given).
+noise is searched only with the coloured noise (and not when `white` is given). On a record long
+enough for Whittle's engine the gain drift is not searched: only the Kalman filter runs it (minutes
+a fit at 60,000 samples); a `gain` in the table fits one.
 
 Why BIC: it is a consistent criterion for the order (the probability of choosing the true order
 goes to 1 as n grows, where AIC keeps a fixed chance of adding spurious components), and its
@@ -971,6 +973,10 @@ def choose_order(
     search = {k: k not in fixed for k in SEARCHED}
     search["white"] = search["noise"] and "white" not in fixed
     current = fit_fixed(series, spec)
+    if search["gain"] and current.model.spectral is not None:
+        # a gain drift's likelihood needs the Kalman filter: minutes per fit on a record this long
+        search["gain"] = False
+        logger.info("model order: a gain drift is not searched on a long record (give `gain` to fit one)")
     rows: list[dict[str, Any]] = [_row(0, "start: " + _describe(spec), current, None, "full", True)]
     logger.info("model order: %s, BIC %.1f", _describe(spec), current.bic)
     ambiguous: list[dict[str, Any]] = []

@@ -4,6 +4,7 @@ unconstrained space."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -24,6 +25,9 @@ class Posterior:
         #: the best (ln L, values) found so far of the model without each line, by the line's label
         #: (`vibinverse.detection.null_optimum`: the stages of one fit refine one optimum)
         self.null_optima: dict[str, tuple[float, dict[str, float]]] = {}
+        #: the line tests already made, by the point they were made at (the MAP's, and the same
+        #: point again when a sampler's stage keeps it: `vibinverse.detection.line_detection`)
+        self.line_tests: dict[tuple[tuple[str, float], ...], dict[str, Any]] = {}
 
     @property
     def series(self) -> Series:

@@ -262,6 +262,14 @@ def trust(summary: dict, lines: list[VerdictLine] | None = None) -> tuple[bool |
                     "Hessian not positive definite",
                 )
             )
+        elif "importance_check" in d:
+            failed.append(
+                (
+                    f"intervals from a {label} that fails its importance check ({d['importance_check']}): "
+                    "they may be too narrow or off-centre (run --method mcmc to sample the posterior)",
+                    "Laplace approximation unchecked",
+                )
+            )
         elif "psis_khat" in d:
             checked = (
                 f"Pareto k {format_number(d['psis_khat'], '.2f')}, "

@@ -16,7 +16,9 @@ degrees of freedom; the Nyquist ordinate, when m is even, one):
 
     log L = -(m - 1) / 2 log(2 pi) - sum_j [log f_j + I_j / f_j] - (Nyquist) 1/2 [log f_N + I_N / f_N].
 
-Cost: one real FFT of the record when the mean changes (lines), O(blocks) per ordinate otherwise;
+Lines (deterministic sinusoids a cos(theta k + psi)) leave the record's transform in closed form
+(`line_transform`: a geometric sum per line and ordinate, no FFT and no pass over the samples).
+Cost: O(blocks + lines) per ordinate, the record's FFT once;
 the Kalman filter's O(states^2) per sample with a fixed point in its gain is ~10x dearer per call.
 It holds for stationary Gaussian records long against the slowest correlation time (the order
 search and fits of long uniform records: `vibinverse.models.modal`); gaps, irregular stamps and a
@@ -71,6 +73,75 @@ def spectral_density(cw, sw, c, diff, phi, q, h, r, starts, sizes, out):  # prag
                     q11 * (n1r * n1r + n1i * n1i) + q22 * (n2r * n2r + n2i * n2i) + 2.0 * q12 * (n1r * n2r + n1i * n2i)
                 )
                 out[j] += (c[j] if diff else 1.0) * num / (detr * detr + deti * deti)
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def line_transform(cw, sw, m, diff, theta, psi, amp, out):  # pragma: no cover - compiled
+    """The transform (ordinates j = 1 ..) of the line amp cos(theta k + psi), k = 0 .. (theta
+    radians per sample, psi the phase at the first sample), or of its differences (diff 1), into
+    the complex `out`. With cos = (e^{i.} + e^{-i.}) / 2 each half is a geometric sum over the m
+    values, sum_k e^{i (s theta - w_j) k} = (1 - e^{i m s theta}) / (1 - e^{i s theta} e^{-i w_j})
+    (s = +-1, e^{-i m w_j} = 1), a difference multiplying the line by (e^{i s theta} - 1): one
+    complex division per sign and ordinate from cw = cos w_j, sw = sin w_j. Within 1e-7 of a pole
+    (a line on an ordinate) the sum is e^{i (m - 1) d / 2} sin(m d / 2) / sin(d / 2),
+    d = s theta - w_j (m at d = 0)."""
+    cre = np.empty(2)  # per sign: the coefficient (amp / 2) e^{i s psi} [(e^{i s theta} - 1)] ...
+    cim = np.empty(2)
+    nre = np.empty(2)  # ... times (1 - e^{i m s theta}), the numerator
+    nim = np.empty(2)
+    ere = np.empty(2)  # e^{i s theta}
+    eim = np.empty(2)
+    for s in range(2):
+        sg = 1.0 if s == 0 else -1.0
+        th, ph = sg * theta, sg * psi
+        ar, ai = 0.5 * amp * math.cos(ph), 0.5 * amp * math.sin(ph)
+        if diff:
+            dr, di = math.cos(th) - 1.0, math.sin(th)
+            ar, ai = ar * dr - ai * di, ar * di + ai * dr
+        br, bi = 1.0 - math.cos(m * th), -math.sin(m * th)
+        cre[s], cim[s] = ar, ai
+        nre[s], nim[s] = ar * br - ai * bi, ar * bi + ai * br
+        ere[s], eim[s] = math.cos(th), math.sin(th)
+    for j in range(out.shape[0]):
+        tr, ti = 0.0, 0.0
+        for s in range(2):
+            qr = 1.0 - (ere[s] * cw[j] + eim[s] * sw[j])  # 1 - e^{i s theta} e^{-i w_j}
+            qi = -(eim[s] * cw[j] - ere[s] * sw[j])
+            den = qr * qr + qi * qi
+            if den > 1e-14:
+                tr += (nre[s] * qr + nim[s] * qi) / den
+                ti += (nim[s] * qr - nre[s] * qi) / den
+            else:  # on (or next to) the ordinate: the sum by its sines
+                sg = 1.0 if s == 0 else -1.0
+                d = sg * theta - 2.0 * math.pi * (j + 1) / m
+                d = d - 2.0 * math.pi * round(d / (2.0 * math.pi))
+                half = math.sin(0.5 * d)
+                mag = float(m) if abs(half) < 1e-300 else math.sin(0.5 * m * d) / half
+                kr, ki = mag * math.cos(0.5 * (m - 1) * d), mag * math.sin(0.5 * (m - 1) * d)
+                tr += cre[s] * kr - cim[s] * ki
+                ti += cre[s] * ki + cim[s] * kr
+        out[j] = complex(tr, ti)
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def _dot(a, b):  # pragma: no cover - compiled
+    """sum_j a_j b_j in one thread (a BLAS dot spins threads up: 3-5x slower on a busy machine)."""
+    acc = 0.0
+    for j in range(a.shape[0]):
+        acc += a[j] * b[j]
+    return acc
+
+
+def lines_sum(k: int, theta: np.ndarray, psi: np.ndarray, amp: np.ndarray) -> float:
+    """sum_{i < k} of the lines amp cos(theta i + psi), in closed form:
+    sin(k theta / 2) / sin(theta / 2) cos(psi + (k - 1) theta / 2) per line (k cos psi at theta = 0)."""
+    th = np.asarray(theta, dtype=float)
+    half = np.sin(0.5 * th)
+    tiny = np.abs(half) < 1e-300
+    ratio = np.where(tiny, float(k), np.sin(0.5 * k * th) / np.where(tiny, 1.0, half))
+    return float(
+        np.sum(np.asarray(amp, dtype=float) * ratio * np.cos(np.asarray(psi, dtype=float) + 0.5 * (k - 1) * th))
+    )
 
 
 @njit(cache=True, fastmath=False, nogil=True)
@@ -132,6 +203,24 @@ class Periodogram:
         spec = self.transform(y)
         return (spec.real**2 + spec.imag**2) / self.m
 
+    def without_lines(self, spec: np.ndarray, theta: np.ndarray, psi: np.ndarray, amp: np.ndarray) -> np.ndarray:
+        """I_j of the record less the lines amp cos(theta k + psi) (theta radians per sample, psi the
+        phase at the first sample) from the record's `transform` `spec`, in closed form (`line_transform`)."""
+        rest = np.array(spec, dtype=complex)
+        for th, ps, a in zip(np.atleast_1d(theta), np.atleast_1d(psi), np.atleast_1d(amp)):
+            rest -= self.line_transform(float(th), float(ps), float(a))
+        return self.power(rest)
+
+    def line_transform(self, theta: float, psi: float, amp: float) -> np.ndarray:
+        """The `transform` of the line amp cos(theta k + psi) in closed form (`line_transform`)."""
+        out = np.empty(self.c.size, dtype=complex)
+        line_transform(self.cw, self.sw, self.m, self.differences, theta, psi, amp, out)
+        return out
+
+    def power(self, spec: np.ndarray) -> np.ndarray:
+        """I_j = |spec_j|^2 / m of a `transform`."""
+        return (spec.real**2 + spec.imag**2) / self.m
+
     def log_likelihood(
         self,
         power: np.ndarray,
@@ -148,12 +237,46 @@ class Periodogram:
         (starts, sizes); the zero frequency left out (`zero_frequency_term`). Differenced, the
         variance of the model's stationary part (`stationary_variance`, h P0 h' + r with the walk
         at 0) gives the end-to-end jump's share of every ordinate."""
-        density = np.empty(self.c.size)  # per call: threads evaluate walkers at once
+        return self.whittle(power, self.density(phi, q, h, r, starts, sizes, stationary_variance))
+
+    def density(
+        self,
+        phi: np.ndarray,
+        q: np.ndarray,
+        h: np.ndarray,
+        r: float,
+        starts: np.ndarray,
+        sizes: np.ndarray,
+        stationary_variance: float = 0.0,
+    ) -> np.ndarray:
+        """The model's density at the ordinates (of the differences: times c(w), plus the end-to-end
+        jump's share 2 v / m), a new array each call (threads evaluate walkers at once)."""
+        density = np.empty(self.c.size)
         spectral_density(self.cw, self.sw, self.c, self.differences, phi, q, h, r, starts, sizes, density)
         if self.differences and stationary_variance > 0.0:
             density += 2.0 * stationary_variance / self.m  # the end-to-end jump's share (module docstring)
-        ll = whittle_sum(power, density, self.nyquist)
-        return float(ll - 0.5 * (self.m - 1) * _LOG_2PI)
+        return density
+
+    def whittle(self, power: np.ndarray, density: np.ndarray) -> float:
+        """Whittle's log-likelihood of the periodogram `power` under `density` (`density`)."""
+        return float(whittle_sum(power, density, self.nyquist) - 0.5 * (self.m - 1) * _LOG_2PI)
+
+    def weights(self, density: np.ndarray) -> tuple[np.ndarray, float]:
+        """(w_j / f_j, sum_j w_j log f_j + (m - 1) / 2 log 2 pi), w_j 1 (1/2 at Nyquist), of a
+        density: Whittle's likelihood of any periodogram is then one dot product (`weighted`);
+        (empty, inf) when a density is <= 0."""
+        if not np.all(density > 0.0):
+            return np.empty(0), math.inf
+        w = np.ones(density.size)
+        if self.nyquist:
+            w[-1] = 0.5
+        return w / density, float(_dot(w, np.log(density)) + 0.5 * (self.m - 1) * _LOG_2PI)
+
+    @staticmethod
+    def weighted(power: np.ndarray, weights: tuple[np.ndarray, float]) -> float:
+        """Whittle's log-likelihood of `power` under a density's `weights` (-inf under none)."""
+        inverse, constant = weights
+        return -math.inf if not math.isfinite(constant) else float(-(constant + _dot(power, inverse)))
 
     def zero_density(
         self, phi: np.ndarray, q: np.ndarray, h: np.ndarray, r: float, starts: np.ndarray, sizes: np.ndarray

@@ -78,7 +78,14 @@ from typing import Any
 import numpy as np
 
 from vibinverse.engines.kalman import block_filter, simulate_blocks
-from vibinverse.engines.whittle import Periodogram, block_layout, level_term, level_window, walk_step_variance
+from vibinverse.engines.whittle import (
+    Periodogram,
+    block_layout,
+    level_term,
+    level_window,
+    lines_sum,
+    walk_step_variance,
+)
 from vibinverse.errors import SceneError
 from vibinverse.io.series import MIN_CYCLES, Series, evenly_spaced
 from vibinverse.kalman import filter_two_states, njit, unique_steps
@@ -507,6 +514,12 @@ class ModalModel(SignalModel):
             self.series, not bool(self.good.all()), bool(self.spec.gain), bool(np.any(self.kinds == _IWALK))
         )
         self._power: np.ndarray | None = None
+        self._transform: np.ndarray | None = None
+        # the last lines' periodogram and the last density, each with its key: a finite-difference
+        # gradient moves one parameter at a time, so one of the two is reused
+        self._lines_power: tuple[tuple, np.ndarray] | None = None
+        self._line_parts: dict[tuple[float, float, float], np.ndarray] = {}
+        self._density: tuple[bytes, tuple[np.ndarray, float]] | None = None
         self._level_window: int | None = None
         self._leading: tuple[int, float] | None = None
 
@@ -589,8 +602,7 @@ class ModalModel(SignalModel):
         self, values: dict[str, float], with_mean: bool = True
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray]:
         """(mean, phis, qs, r, P0) at `values` (the arrays are reused by the next call in this thread;
-        `with_mean` False leaves the mean's unfilled: Whittle's engine without lines needs only the
-        level)."""
+        `with_mean` False leaves the mean unfilled: Whittle's engine takes the lines in closed form)."""
         s, v = self.spec, lambda n: self.value(values, n)
         phis, qs, p0, pars, mean, _ = self._scratch()
         b = 0
@@ -618,7 +630,7 @@ class ModalModel(SignalModel):
             ph = np.array([v(f"lines[{j}].phase") for j in range(s.lines)])
         else:
             f = a = ph = np.zeros(0)
-        if with_mean or s.lines:
+        if with_mean:
             _lines_mean(self.t, float(v("level")), f, a, ph, mean)
         if s.gain:
             mean *= self.multiplier(values)
@@ -737,26 +749,74 @@ class ModalModel(SignalModel):
     def _whittle(self, values: dict[str, float]) -> float:
         """Whittle's log-likelihood of the record's differences (`vibinverse.engines.whittle`) and
         the level's share (`level_term`: the mean residual of the leading samples that carry it)."""
-        mean, phis, qs, r, p0 = self.tables(values, with_mean=False)
-        if self.spec.lines:
-            power = self.spectral.of(self.y - mean)
+        _, phis, qs, r, p0 = self.tables(values, with_mean=False)
+        if self.spec.lines:  # the record's transform once, the lines' in closed form (`without_lines`)
+            if self._transform is None:
+                self._transform = self.spectral.transform(self.y)
+            theta, psi, amp = self._line_phasors(values)
+            power = self._power_without_lines(theta, psi, amp)
         else:  # a constant mean: the differences' periodogram is the record's, computed once
             if self._power is None:
                 self._power = self.spectral.of(self.y)
             power = self._power
         blocks = (self.block_starts, self.block_sizes)
         v0 = float(self.h @ p0 @ self.h) + r  # the stationary part's variance (the walk's P0 is 0)
-        ll = self.spectral.log_likelihood(power, phis[0], qs[0], self.h, r, *blocks, stationary_variance=v0)
+        key = np.concatenate((phis[0].ravel(), qs[0].ravel(), (r, v0))).tobytes()
+        cached = self._density
+        if cached is not None and cached[0] == key:
+            weights = cached[1]
+        else:
+            density = self.spectral.density(phis[0], qs[0], self.h, r, *blocks, stationary_variance=v0)
+            weights = self.spectral.weights(density)
+            self._density = (key, weights)
+        ll = self.spectral.weighted(power, weights)
         f0 = self.spectral.zero_density(phis[0], qs[0], self.h, r, *blocks)
         q = walk_step_variance(phis[0], qs[0], self.h, *blocks)
         if self._level_window is None:  # fixed at the first values seen: the likelihood stays smooth
             self._level_window = level_window(f0, q, self.t.size)
         k = self._level_window
         if self.spec.lines:
-            e = float(np.mean(self.y[:k] - mean[:k]))
+            e = self._leading_mean(k) - self.value(values, "level") - lines_sum(k, theta, psi, amp) / k
         else:  # the mean is the level: the window's mean of y once
             e = self._leading_mean(k) - self.value(values, "level")
         return ll + level_term(e, k, f0, v0, q)
+
+    def _power_without_lines(self, theta: np.ndarray, psi: np.ndarray, amp: np.ndarray) -> np.ndarray:
+        """The periodogram of the record less its lines: each line's transform kept with its values
+        (a finite-difference step moves one line; the others are reused), the last periodogram
+        with all of them. The caches are replaced whole, never changed in place: threads that
+        evaluate walkers at once may recompute, never mix."""
+        keys = tuple(zip(theta.tolist(), psi.tolist(), amp.tolist()))
+        cached = self._lines_power
+        if cached is not None and cached[0] == keys:
+            return cached[1]
+        parts = dict(self._line_parts)
+        rest = self._transform.copy()
+        for key in keys:
+            if key[2] == 0.0:  # a line held at zero amplitude (a detection test's null) adds nothing
+                continue
+            part = parts.get(key)
+            if part is None:
+                part = parts[key] = self.spectral.line_transform(*key)
+            rest -= part
+        # kept: this call's lines and the last call's (a step and the point it steps from)
+        last = cached[0] if cached is not None else ()
+        self._line_parts = {k: parts[k] for k in (*last, *keys) if k in parts}
+        power = self.spectral.power(rest)
+        self._lines_power = (keys, power)
+        return power
+
+    def _line_phasors(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The lines on the record's grid, a cos(theta k + psi): theta = 2 pi f dt radians per sample
+        (dt the grid's step from the first to the last stamp), psi = 2 pi f t_0 + phase."""
+        n = self.t.size
+        step = (self.t[-1] - self.t[0]) / (n - 1)
+        idx = range(self.spec.lines)
+        f = np.array([self.value(values, f"lines[{j}].frequency") for j in idx])
+        amp = np.array([self.value(values, f"lines[{j}].amplitude") for j in idx])
+        ph = np.array([self.value(values, f"lines[{j}].phase") for j in idx])
+        w = 2.0 * math.pi * f
+        return w * step, w * self.t[0] + ph, amp
 
     def _leading_mean(self, k: int) -> float:
         """The mean of the first k samples (kept for the last k asked)."""
