@@ -124,13 +124,13 @@ def run(
     if method in ("map", "casadi"):
         best.timing = timing
         return best
-    if method == "importance" or (
-        method == "auto" and (posterior.series.time.size > IMPORTANCE_RECORD or posterior.model.importance_first)
-    ):
+    long_record = posterior.series.time.size > IMPORTANCE_RECORD
+    first = method == "auto" and (long_record or posterior.model.importance_first)  # not asked for: tried first
+    if method == "importance" or first:
         try:
             result = LaplaceImportance().fit(posterior, best, seed=seed, workers=workers)
         except Unsupported as exc:
-            if method == "auto" and posterior.series.time.size > IMPORTANCE_RECORD:
+            if first and long_record:
                 # emcee's walkers on a long record: tens of minutes to hours (a 63,000-sample beam
                 # record with 6 modes and 5 lines: 35 parameters, ~1 ms a call); the Laplace
                 # approximation answers, and says that its check failed
@@ -139,7 +139,7 @@ def run(
                 )
                 best.diagnostics["importance_check"] = str(exc).removeprefix("the Laplace approximation fails its ")
                 return _finish(best, best, sindy, timing, method)
-            (logger.warning if method == "importance" else logger.info)("%s; sampling with emcee", exc)
+            (logger.info if first else logger.warning)("%s; sampling with emcee", exc)
         else:
             return _finish(result, best, sindy, timing, method)
     result = Emcee().fit(

@@ -95,7 +95,9 @@ def _noise_posterior(seed, n=256, lo=5.0, hi=45.0, gaps=0.0):
     space = ParameterSpace(
         {"f": Prior("uniform", (lo, hi)), "a": Prior("uniform", (0.0, 10.0)), "phi": Prior("uniform", (-4.0, 4.0))}
     )
-    post = SimpleNamespace(model=model, series=model.series, space=space, bounds={"f": (lo, hi)}, null_optima={})
+    post = SimpleNamespace(
+        model=model, series=model.series, space=space, bounds={"f": (lo, hi)}, null_optima={}, line_tests={}
+    )
     return post, model.fit(lo, hi)
 
 
