@@ -197,3 +197,18 @@ def test_whittle_with_lines_tracks_the_filter():
         dk = model.exact_log_likelihood(v) - base_k
         assert dk < -2.0, name  # the step is informative
         assert dw == pytest.approx(dk, rel=0.15), name
+
+
+def test_steady_stamps_off_one_grid_use_whittle_and_a_dropped_frame_does_not():
+    """A clock whose rate wanders (every step within 0.1 % of the mean, the stamps up to half a step
+    off one grid) is read on the regular grid; a dropped frame is not steady."""
+    rng = np.random.default_rng(3)
+    n = WHITTLE_MIN_SAMPLES + 10
+    steps = 0.01 * (1.0 + 1e-3 * np.sin(np.linspace(0, 40, n - 1)))
+    t = np.concatenate(([0.0], np.cumsum(steps)))
+    series = Series(t, rng.normal(size=n), "steady")
+    assert not series.uniform
+    assert ModalModel({"modal": {"modes": 1}}, series).spectral is not None
+    dropped = np.delete(np.arange(n + 1) * 0.01, 500)
+    series = Series(dropped, rng.normal(size=n), "dropped")
+    assert ModalModel({"modal": {"modes": 1}}, series).spectral is None
