@@ -221,24 +221,6 @@ class Periodogram:
         """I_j = |spec_j|^2 / m of a `transform`."""
         return (spec.real**2 + spec.imag**2) / self.m
 
-    def log_likelihood(
-        self,
-        power: np.ndarray,
-        phi: np.ndarray,
-        q: np.ndarray,
-        h: np.ndarray,
-        r: float,
-        starts: np.ndarray,
-        sizes: np.ndarray,
-        stationary_variance: float = 0.0,
-    ) -> float:
-        """Whittle's log-likelihood (module docstring) of the values whose periodogram is `power`,
-        under the one-step tables (phi, q), observation row h, white variance r and the blocks
-        (starts, sizes); the zero frequency left out (`zero_frequency_term`). Differenced, the
-        variance of the model's stationary part (`stationary_variance`, h P0 h' + r with the walk
-        at 0) gives the end-to-end jump's share of every ordinate."""
-        return self.whittle(power, self.density(phi, q, h, r, starts, sizes, stationary_variance))
-
     def density(
         self,
         phi: np.ndarray,
@@ -249,8 +231,11 @@ class Periodogram:
         sizes: np.ndarray,
         stationary_variance: float = 0.0,
     ) -> np.ndarray:
-        """The model's density at the ordinates (of the differences: times c(w), plus the end-to-end
-        jump's share 2 v / m), a new array each call (threads evaluate walkers at once)."""
+        """The density (module docstring) at the ordinates under the one-step tables (phi, q),
+        observation row h, white variance r and the blocks (starts, sizes); of the differences,
+        times c(w), plus the share 2 v / m of the end-to-end jump of the stationary part
+        (`stationary_variance` v, h P0 h' + r with the walk at 0). A new array each call (threads
+        evaluate walkers at once)."""
         density = np.empty(self.c.size)
         spectral_density(self.cw, self.sw, self.c, self.differences, phi, q, h, r, starts, sizes, density)
         if self.differences and stationary_variance > 0.0:
@@ -258,7 +243,8 @@ class Periodogram:
         return density
 
     def whittle(self, power: np.ndarray, density: np.ndarray) -> float:
-        """Whittle's log-likelihood of the periodogram `power` under `density` (`density`)."""
+        """Whittle's log-likelihood (module docstring) of the periodogram `power` under `density`
+        (`density`), the zero frequency left out."""
         return float(whittle_sum(power, density, self.nyquist) - 0.5 * (self.m - 1) * _LOG_2PI)
 
     def weights(self, density: np.ndarray) -> tuple[np.ndarray, float]:
