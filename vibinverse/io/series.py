@@ -46,6 +46,18 @@ class Series:
     scene: dict[str, Any] | None = None  # the true scene, when the file carries it (vibinverse simulate)
     notes: list[str] = field(default_factory=list)  # what the reader recorded: a time reference, units
 
+    def __post_init__(self) -> None:
+        """One value per stamp, both 1-D float arrays; else a one-line InputError naming the shapes."""
+        t = np.asarray(self.time, dtype=float)
+        y = np.asarray(self.intensity, dtype=float)
+        if t.ndim != 1 or y.shape != t.shape:
+            raise InputError(
+                f"series {self.source}: time and intensity must be 1-D with one value per stamp; got shapes "
+                f"{t.shape} and {y.shape}"
+            )
+        object.__setattr__(self, "time", t)
+        object.__setattr__(self, "intensity", y)
+
     @property
     def gaps(self) -> NDArray[np.bool_]:
         return ~np.isfinite(self.intensity)

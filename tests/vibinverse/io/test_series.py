@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import vibinverse as vi
-from vibinverse.errors import DataError, VibinverseError
+from vibinverse.errors import DataError, InputError, VibinverseError
 from vibinverse.io.builtin import builtin_scene
-from vibinverse.io.series import check_resolves, load_series, validate
+from vibinverse.io.series import Series, check_resolves, load_series, validate
 
 
 def test_csv_with_comments_truth_and_gaps(tmp_path):
@@ -409,3 +409,14 @@ def test_cli_fit_reads_named_columns_and_fs(tmp_path, plate):
     _same_fit({k: v["median"] for k, v in summary["parameters"].items()}, want)
     lines = err.getvalue().strip().splitlines()
     assert len(lines) == 1 and "no value column intensity" in lines[0] and "--value-column" in lines[0]
+
+
+def test_a_series_is_one_value_per_stamp():
+    """A table of two columns given as the intensity, or a length that does not match the stamps,
+    is a one-line InputError naming both shapes, not an index error deep in a fit."""
+    with pytest.raises(InputError, match=r"got shapes \(4,\) and \(4, 2\)"):
+        Series(np.arange(4.0), np.zeros((4, 2)), "table")
+    with pytest.raises(InputError, match=r"\(4,\) and \(3,\)"):
+        Series(np.arange(4.0), np.zeros(3), "short")
+    s = Series([0, 1, 2], [1, 2, 3], "lists")
+    assert s.time.dtype == float and s.intensity.dtype == float
