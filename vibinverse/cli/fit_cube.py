@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from vibinverse.cli import ranges
-from vibinverse.cli.outputs import csv_cell
 from vibinverse.errors import InputError
+from vibinverse.io.file_basics import csv_cell
 
 if TYPE_CHECKING:
     from vibinverse.result import FitResult

@@ -14,21 +14,12 @@ from vibinverse.errors import InputError
 
 # what may end a line for some reader: C0 controls, DEL, NEL, and the Unicode line and paragraph separators
 _LINE_BREAKERS = re.compile("[\x00-\x1f\x7f\x85\u2028\u2029]")
-_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")  # a spreadsheet reads a cell starting so as a formula
 
 
 def one_line(text: object) -> str:
     """User-given text (a file name, a units attribute, a title) for one line of a text file, e.g.
     a CSV '#' comment: every character that could end the line is written as its escape (\\n)."""
     return _LINE_BREAKERS.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), str(text))
-
-
-def csv_cell(value: object) -> object:
-    """A text cell of a CSV table that a spreadsheet will not run as a formula (a leading quote
-    before = + - @); numbers and other values pass through."""
-    if isinstance(value, str) and value.startswith(_FORMULA_START):
-        return "'" + value
-    return value
 
 
 def output_dir(path: str | Path) -> Path:

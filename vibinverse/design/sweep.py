@@ -19,6 +19,7 @@ from vibinverse.design.spec import Axis, configure, grid, parse_vary
 from vibinverse.errors import SceneError
 from vibinverse.io import jsonio
 from vibinverse.io.atomic import write_all
+from vibinverse.io.file_basics import csv_cell
 
 PAPER_THRESHOLD = 1e-4  # the paper's detectability threshold on the sensitivity (21)
 N_BEST = 10
@@ -181,4 +182,5 @@ def write_design(result: dict[str, Any], outdir: Path) -> list[Path]:
 
 
 def _cell(v: Any) -> str:
-    return f"{v:.10g}" if isinstance(v, float) else str(v)
+    """A number to 10 digits; text that a spreadsheet will not run as a formula (`csv_cell`)."""
+    return f"{v:.10g}" if isinstance(v, float) else str(csv_cell(v))

@@ -102,6 +102,7 @@ from vibinverse.imaging.whitening import (
     spectrum_rows,
     whiten_rows,
 )
+from vibinverse.io.file_basics import csv_cell
 
 logger = logging.getLogger(__name__)
 
@@ -470,7 +471,7 @@ class DetectionMap:
             writer = csv.DictWriter(fh, fieldnames=names, lineterminator="\n")
             writer.writeheader()
             for r in rows:
-                writer.writerow({k: (f"{v:.10g}" if isinstance(v, float) else v) for k, v in r.items()})
+                writer.writerow({k: (f"{v:.10g}" if isinstance(v, float) else csv_cell(v)) for k, v in r.items()})
 
     def plot(self, path: str | Path) -> None:
         plot_detection(self, path)

@@ -21,6 +21,18 @@ TIME_REFERENCE_NOTE = "time: seconds since "
 UNITS_NOTE = "intensity units: "
 
 
+#: a spreadsheet reads a text cell starting with one of these as a formula
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_cell(value: object) -> object:
+    """A text cell of a CSV table that a spreadsheet will not run as a formula (a leading quote
+    before = + - @); numbers and other values pass through."""
+    if isinstance(value, str) and value.startswith(FORMULA_START):
+        return "'" + value
+    return value
+
+
 def evenly_spaced(t: np.ndarray) -> bool:
     """Whether stamps `t` lie on one regular grid to UNIFORM_RTOL of its step."""
     step = (t[-1] - t[0]) / (t.size - 1)
