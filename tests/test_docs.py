@@ -59,3 +59,16 @@ def test_the_readme_is_short_and_carries_no_dates():
     assert dates == [], dates
     first_block = re.search(r"```[a-z]*\n(.*?)```", text, re.S).group(1).splitlines()
     assert first_block[:2] == ["pip install . && vibinverse demo", 'pip install -e ".[test]" && pytest -n auto']
+
+
+def test_the_real_data_page_shows_the_table_of_its_bench_json():
+    """docs/validation/realdata.md's table is the one docs/validation/realdata_quick.json gives
+    (`update_pages.py` writes both): no number on the page is typed by hand."""
+    import json
+
+    spec = importlib.util.spec_from_file_location("update_pages", ROOT / "docs" / "validation" / "update_pages.py")
+    pages = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(pages)
+    result = json.loads(pages.REALDATA_JSON.read_text())
+    assert pages.table_block(result) in pages.REALDATA_PAGE.read_text()
+    assert not any("/work/" in r.get("path", "") for r in result["rows"])  # no machine's directories
