@@ -38,11 +38,13 @@ def maximize(
     bounded: Sequence[bool] | None = None,
     maxiter: int = 300,
     ftol: float = 1e-10,
+    gradient: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[float, np.ndarray]:
     """(max, argmax) of `log_likelihood(z)` over the coordinates `free` of z, the others held at
-    z0's: L-BFGS-B with finite-difference gradients in units of each coordinate's width at z0
-    (`preconditioner`), a bounded parameter's logit (`bounded`, default all) kept within +-Z_BOX.
-    A non-finite log-likelihood counts as -1e300. The start is returned when nothing beats it."""
+    z0's: L-BFGS-B with the `gradient` (d log_likelihood / dz, every coordinate) or finite-difference
+    gradients, in units of each coordinate's width at z0 (`preconditioner`), a bounded parameter's
+    logit (`bounded`, default all) kept within +-Z_BOX. A non-finite log-likelihood counts as
+    -1e300. The start is returned when nothing beats it."""
     z0 = np.asarray(z0, dtype=float)
     pos = list(free)
     if not pos:
@@ -60,11 +62,21 @@ def maximize(
     limits = [
         ((-Z_BOX - a) / s, (Z_BOX - a) / s) if b else (None, None) for a, s, b in zip(zf0, scale, box, strict=True)
     ]
+    jac = None
+    if gradient is not None:
+
+        def jac(w: np.ndarray) -> np.ndarray:
+            z = z0.copy()
+            z[pos] = zf0 + scale * w
+            g = np.asarray(gradient(z), dtype=float)[pos]
+            return np.where(np.isfinite(g), -g * scale, 0.0)
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         res = minimize(
             lambda w: neg(zf0 + scale * w),
             np.zeros(len(pos)),
+            jac=jac,
             method="L-BFGS-B",
             bounds=limits,
             options={"maxiter": maxiter, "ftol": ftol, "gtol": 1e-6, "eps": 1e-6},

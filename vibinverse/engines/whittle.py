@@ -124,7 +124,7 @@ def line_transform(cw, sw, m, diff, theta, psi, amp, out):  # pragma: no cover -
 
 
 @njit(cache=True, fastmath=False, nogil=True)
-def _dot(a, b):  # pragma: no cover - compiled
+def dot(a, b):  # pragma: no cover - compiled
     """sum_j a_j b_j in one thread (a BLAS dot spins threads up: 3-5x slower on a busy machine)."""
     acc = 0.0
     for j in range(a.shape[0]):
@@ -256,13 +256,13 @@ class Periodogram:
         w = np.ones(density.size)
         if self.nyquist:
             w[-1] = 0.5
-        return w / density, float(_dot(w, np.log(density)) + 0.5 * (self.m - 1) * _LOG_2PI)
+        return w / density, float(dot(w, np.log(density)) + 0.5 * (self.m - 1) * _LOG_2PI)
 
     @staticmethod
     def weighted(power: np.ndarray, weights: tuple[np.ndarray, float]) -> float:
         """Whittle's log-likelihood of `power` under a density's `weights` (-inf under none)."""
         inverse, constant = weights
-        return -math.inf if not math.isfinite(constant) else float(-(constant + _dot(power, inverse)))
+        return -math.inf if not math.isfinite(constant) else float(-(constant + dot(power, inverse)))
 
     def zero_density(
         self, phi: np.ndarray, q: np.ndarray, h: np.ndarray, r: float, starts: np.ndarray, sizes: np.ndarray

@@ -212,3 +212,34 @@ def test_steady_stamps_off_one_grid_use_whittle_and_a_dropped_frame_does_not():
     dropped = np.delete(np.arange(n + 1) * 0.01, 500)
     series = Series(dropped, rng.normal(size=n), "dropped")
     assert ModalModel({"modal": {"modes": 1}}, series).spectral is None
+
+
+@pytest.mark.parametrize(
+    "spec",
+    [
+        {"modes": 1, "lines": 2, "drift": True},
+        {"modes": 2, "lines": 1, "noise": "ar1"},
+        {"modes": 1, "noise": "1/f"},
+    ],
+)
+def test_whittle_gradient_is_the_slope_of_the_likelihood(spec):
+    """ModalModel.whittle_gradient (linearized, one block or line at a time) equals central
+    differences of Whittle's ln L for every parameter: modes, lines (frequency, amplitude, phase),
+    drift, AR(1), 1/f, white noise, level."""
+    series = long_record(2)
+    t = series.time
+    y = series.intensity + 0.4 * np.cos(2 * np.pi * 7.3 * t + 0.5) + 0.2 * np.cos(2 * np.pi * 2.9 * t - 1.0)
+    series = Series(t + 3.7, y, "lines")
+    model = ModalModel({"modal": spec}, series)
+    start = model.guesses(model.default_priors())[0]
+    slope = model.whittle_gradient(start)
+    assert set(slope) == set(start)
+    span = series.time[-1] - series.time[0]
+    for name, d in slope.items():
+        v = start[name]
+        if name.endswith(".frequency"):
+            h = 1e-6 * min(v, 1.0 / span)
+        else:
+            h = 1e-6 * max(abs(v), 1.0 if name.endswith(".phase") else model.sd if name == "level" else 1e-12)
+        num = (model.log_likelihood({**start, name: v + h}) - model.log_likelihood({**start, name: v - h})) / (2 * h)
+        assert d == pytest.approx(num, rel=1e-4, abs=1e-3), name
