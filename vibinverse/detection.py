@@ -99,12 +99,17 @@ def null_optimum(posterior: Posterior, values: dict[str, float], test: LineTest)
     ll0, start = max(scored, key=lambda x: x[0] if math.isfinite(x[0]) else -math.inf)
     z0 = space.to_z({n: p.inside(values[n] if n in test.null else start[n]) for n, p in zip(space.names, space.priors)})
     bounded = [all(math.isfinite(b) for b in p.bounds) for p in space.priors]
+
+    def slope(z: np.ndarray) -> np.ndarray:
+        return space.gradient_z(z, model.slope({**values, **space.from_z(z), **test.null}, held) or {})
+
     ll, z = maximize(
         lambda z: model.log_likelihood({**values, **space.from_z(z), **test.null}),
         z0,
         [space.names.index(n) for n in held],
         bounded=bounded,
         maxiter=REFIT_ITERATIONS,
+        gradient=slope if model.slope(start, []) is not None else None,
     )
     if not ll >= ll0:
         ll, found = ll0, start

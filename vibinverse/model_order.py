@@ -280,7 +280,9 @@ def fit_order(
             pos,
             maxiter=maxiter,
             ftol=ftol,
-            gradient=None if model.spectral is None else lambda z: whittle_gradient_z(model, space, z, free),
+            gradient=None
+            if model.spectral is None
+            else lambda z: space.gradient_z(z, model.whittle_gradient(space.from_z(z), free)),
         )
         if best is None or ll > best[0]:
             best = (ll, sort_labels(space.from_z(z), spec))
@@ -289,19 +291,6 @@ def fit_order(
     # orders are compared by the exact ln L at their optimum, whichever engine found it
     ll = best[0] if model.spectral is None else model.exact_log_likelihood(best[1])
     return OrderFit(spec, model, best[1], ll, len(names), model.n_obs, windows)
-
-
-def whittle_gradient_z(model: ModalModel, space: ParameterSpace, z: np.ndarray, free: list[str]) -> np.ndarray:
-    """d ln L / dz of Whittle's likelihood (`ModalModel.whittle_gradient`) for the parameters
-    `free` (0 for the others): the value's slope times d value / dz. Taken at the values as z gives
-    them, unsorted: the likelihood does not depend on the modes' and lines' labels."""
-    values = space.from_z(z)
-    slope = model.whittle_gradient(values, free)
-    out = np.zeros(z.size)
-    for i, (name, prior) in enumerate(zip(space.names, space.priors)):
-        if name in slope:
-            out[i] = slope[name] * math.exp(prior.log_jacobian(float(z[i])))
-    return out
 
 
 def _wrapped(name: str, value: float, centre: float) -> float:

@@ -149,6 +149,15 @@ class ParameterSpace:
     def from_z(self, z: np.ndarray) -> dict[str, float]:
         return {n: p.from_unbounded(float(v)) for n, p, v in zip(self.names, self.priors, z)}
 
+    def gradient_z(self, z: np.ndarray, slope: dict[str, float]) -> np.ndarray:
+        """d / dz of a function whose slope in each value is `slope` (0 for a name it lacks): the
+        slope times d value / dz."""
+        out = np.zeros(len(self.names))
+        for i, (name, prior) in enumerate(zip(self.names, self.priors)):
+            if name in slope:
+                out[i] = slope[name] * math.exp(prior.log_jacobian(float(z[i])))
+        return out
+
     def log_prior_z(self, z: np.ndarray) -> float:
         """log prior density of the values plus the log Jacobian of the transform."""
         total = 0.0

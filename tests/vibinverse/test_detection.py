@@ -55,6 +55,9 @@ class _Sinusoid:
     def line_tests(self, values, free):
         return [LineTest("line", {"a": 0.0}, "f" if "f" in free else None)]
 
+    def slope(self, values, names):
+        return None  # no gradient of its own: the refit takes finite differences
+
     def fit_at(self, f):
         """(gain, values) of the least-squares sinusoid at frequency f."""
         t, y = self.series.time, self.series.intensity

@@ -99,6 +99,11 @@ class SignalModel(ABC):
     def log_likelihood(self, values: dict[str, float]) -> float:
         """log p(data | values) (the exact likelihood; -inf outside what the model allows)."""
 
+    def slope(self, values: dict[str, float], names: list[str]) -> dict[str, float] | None:
+        """d log_likelihood / d value of each of `names` at `values` when the model has a cheaper way
+        than a call per parameter; None: the optimizers take finite differences."""
+        return None
+
     @abstractmethod
     def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
         """Starting values of the free parameters (keys of `bounds`) from the spectrum, most

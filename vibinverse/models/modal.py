@@ -796,6 +796,10 @@ class ModalModel(SignalModel):
             e = self._leading_mean(k) - self.value(values, "level")
         return ll + level_term(e, k, f0, v0, q)
 
+    def slope(self, values: dict[str, float], names: list[str]) -> dict[str, float] | None:
+        """Whittle's gradient (`whittle_gradient`) when Whittle's engine runs; None otherwise."""
+        return None if self.spectral is None else self.whittle_gradient(values, names)
+
     def whittle_gradient(self, values: dict[str, float], names: list[str] | None = None) -> dict[str, float]:
         """d ln L / d value of Whittle's log-likelihood (`_whittle`) at `values` for each of `names`
         (default: every parameter), from its linearization: d ln L = sum_j w_j (I_j / f_j^2 - 1 / f_j)
