@@ -349,7 +349,9 @@ def _check_bad_option(verb: str, option: str, argv: list[str]) -> None:
         if option.startswith("--"):
             assert option in line, (option, line)
         if option.startswith("--") and verb != "init":  # a number's line names its allowed range
-            assert any(w in line for w in ("range", "invalid", "allowed", "expected one argument")), line
+            # ... or where the option applies (a cube fit's --reference given to a series fit)
+            words = ("range", "invalid", "allowed", "expected one argument", "applies to")
+            assert any(w in line for w in words), line
 
 
 CONTRACT = {"deadline": None, "suppress_health_check": [HealthCheck.function_scoped_fixture, HealthCheck.too_slow]}
