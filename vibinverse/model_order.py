@@ -281,8 +281,8 @@ def fit_order(
             maxiter=maxiter,
             ftol=ftol,
             gradient=None
-            if model.spectral is None
-            else lambda z: space.gradient_z(z, model.whittle_gradient(space.from_z(z), free)),
+            if model.slope(start, []) is None
+            else lambda z: space.gradient_z(z, model.slope(space.from_z(z), free) or {}),
         )
         if best is None or ll > best[0]:
             best = (ll, sort_labels(space.from_z(z), spec))

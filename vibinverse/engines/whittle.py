@@ -144,21 +144,6 @@ def lines_sum(k: int, theta: np.ndarray, psi: np.ndarray, amp: np.ndarray) -> fl
     )
 
 
-@njit(cache=True, fastmath=False, nogil=True)
-def whittle_sum(power, density, nyquist):  # pragma: no cover - compiled
-    """-sum_j [log f_j + I_j / f_j] with weight 1/2 on the last ordinate when it is the Nyquist one;
-    -inf at a density <= 0 (a model that cannot produce the data)."""
-    acc = 0.0
-    last = power.shape[0] - 1
-    for j in range(power.shape[0]):
-        f = density[j]
-        if not f > 0.0:
-            return -np.inf
-        term = math.log(f) + power[j] / f
-        acc -= 0.5 * term if (nyquist and j == last) else term
-    return acc
-
-
 def fast_length(m: int) -> int:
     """The largest length <= m whose only prime factors are 2, 3, 5, 7 and 11 (the FFT's own radices):
     the values beyond it, at most ~0.2 % of a long record, are left out (a prime length takes the
@@ -203,14 +188,6 @@ class Periodogram:
         spec = self.transform(y)
         return (spec.real**2 + spec.imag**2) / self.m
 
-    def without_lines(self, spec: np.ndarray, theta: np.ndarray, psi: np.ndarray, amp: np.ndarray) -> np.ndarray:
-        """I_j of the record less the lines amp cos(theta k + psi) (theta radians per sample, psi the
-        phase at the first sample) from the record's `transform` `spec`, in closed form (`line_transform`)."""
-        rest = np.array(spec, dtype=complex)
-        for th, ps, a in zip(np.atleast_1d(theta), np.atleast_1d(psi), np.atleast_1d(amp)):
-            rest -= self.line_transform(float(th), float(ps), float(a))
-        return self.power(rest)
-
     def line_transform(self, theta: float, psi: float, amp: float) -> np.ndarray:
         """The `transform` of the line amp cos(theta k + psi) in closed form (`line_transform`)."""
         out = np.empty(self.c.size, dtype=complex)
@@ -245,7 +222,7 @@ class Periodogram:
     def whittle(self, power: np.ndarray, density: np.ndarray) -> float:
         """Whittle's log-likelihood (module docstring) of the periodogram `power` under `density`
         (`density`), the zero frequency left out."""
-        return float(whittle_sum(power, density, self.nyquist) - 0.5 * (self.m - 1) * _LOG_2PI)
+        return self.weighted(power, self.weights(density))
 
     def weights(self, density: np.ndarray) -> tuple[np.ndarray, float]:
         """(w_j / f_j, sum_j w_j log f_j + (m - 1) / 2 log 2 pi), w_j 1 (1/2 at Nyquist), of a

@@ -530,11 +530,11 @@ class ModalModel(SignalModel):
         )
         self._power: np.ndarray | None = None
         self._transform: np.ndarray | None = None
-        # the last lines' periodogram and the last density, each with its key: a finite-difference
-        # gradient moves one parameter at a time, so one of the two is reused
+        # the last lines' periodogram and the last density (with f(0) and the walk's step), each with
+        # its key: a finite-difference step moves one parameter, so one of the two is reused
         self._lines_power: tuple[tuple, np.ndarray, np.ndarray] | None = None
         self._line_parts: dict[tuple[float, float, float], np.ndarray] = {}
-        self._density: tuple[bytes, tuple[np.ndarray, float]] | None = None
+        self._density: tuple[bytes, tuple[tuple[np.ndarray, float], float, float]] | None = None
         self._level_window: int | None = None
         self._leading: tuple[int, float] | None = None
 
@@ -765,7 +765,7 @@ class ModalModel(SignalModel):
         """Whittle's log-likelihood of the record's differences (`vibinverse.engines.whittle`) and
         the level's share (`level_term`: the mean residual of the leading samples that carry it)."""
         _, phis, qs, r, p0 = self.tables(values, with_mean=False)
-        if self.spec.lines:  # the record's transform once, the lines' in closed form (`without_lines`)
+        if self.spec.lines:  # the record's transform once, the lines' in closed form (`_rest_without_lines`)
             if self._transform is None:
                 self._transform = self.spectral.transform(self.y)
             theta, psi, amp = self._line_phasors(values)
@@ -779,14 +779,14 @@ class ModalModel(SignalModel):
         key = np.concatenate((phis[0].ravel(), qs[0].ravel(), (r, v0))).tobytes()
         cached = self._density
         if cached is not None and cached[0] == key:
-            weights = cached[1]
+            weights, f0, q = cached[1]
         else:
             density = self.spectral.density(phis[0], qs[0], self.h, r, *blocks, stationary_variance=v0)
             weights = self.spectral.weights(density)
-            self._density = (key, weights)
+            f0 = self.spectral.zero_density(phis[0], qs[0], self.h, r, *blocks)
+            q = walk_step_variance(phis[0], qs[0], self.h, *blocks)
+            self._density = (key, (weights, f0, q))
         ll = self.spectral.weighted(power, weights)
-        f0 = self.spectral.zero_density(phis[0], qs[0], self.h, r, *blocks)
-        q = walk_step_variance(phis[0], qs[0], self.h, *blocks)
         if self._level_window is None:  # fixed at the first values seen: the likelihood stays smooth
             self._level_window = level_window(f0, q, self.t.size)
         k = self._level_window
