@@ -110,10 +110,10 @@ def _flag(name: str) -> str:
     return "--" + name.replace("_", "-")
 
 
-def check_series_options(args: argparse.Namespace) -> None:
-    """A fit of one series refuses the cube's options (one line naming the first)."""
+def check_series_options(args: argparse.Namespace, allow: tuple[str, ...] = ()) -> None:
+    """A fit of one series refuses the cube's options but `allow` (one line naming the first)."""
     for name in CUBE_OPTIONS:
-        if getattr(args, name, None) is not None:
+        if name not in allow and getattr(args, name, None) is not None:
             raise InputError(f"{_flag(name)}: applies to a cube fit; give --pixels (all, a mask or detection.nc:K)")
 
 

@@ -1,0 +1,150 @@
+"""What a multi-channel modal identification returns: modes with frequencies, damping ratios and unit
+shapes (each with its 90 % interval and standard deviation), the MAC matrix, each band's fits over
+model order (the stabilization-style view) and the singular-value spectrum behind them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: the central probability of every interval reported
+INTERVAL = 0.90
+
+
+def mac(a: np.ndarray, b: np.ndarray) -> float:
+    """Modal assurance criterion |a . b|^2 / (|a|^2 |b|^2) of two real or complex shapes."""
+    a, b = np.asarray(a), np.asarray(b)
+    den = float(np.vdot(a, a).real * np.vdot(b, b).real)
+    return float(abs(np.vdot(a, b)) ** 2 / den) if den > 0 else 0.0
+
+
+def mac_matrix(shapes: list[np.ndarray], others: list[np.ndarray] | None = None) -> np.ndarray:
+    """MAC of every pair (shapes x others; others default: shapes)."""
+    others = shapes if others is None else others
+    return np.array([[mac(a, b) for b in others] for a in shapes]).reshape(len(shapes), len(others))
+
+
+def signed_unit(v: np.ndarray) -> np.ndarray:
+    """v / |v|, signed so that its largest-magnitude component is positive (the sign convention of
+    every reported shape)."""
+    v = np.asarray(v, dtype=float)
+    u = v / np.linalg.norm(v)
+    return u if u[int(np.argmax(np.abs(u)))] >= 0 else -u
+
+
+@dataclass
+class OmaMode:
+    """One identified mode: MAP values, 90 % intervals and standard deviations of the frequency
+    (Hz), damping ratio and unit shape over the response channels (largest component positive)."""
+
+    frequency: float
+    damping_ratio: float
+    shape: np.ndarray
+    frequency_interval: tuple[float, float]
+    damping_ratio_interval: tuple[float, float]
+    shape_interval: np.ndarray  # (channels, 2)
+    frequency_sd: float
+    damping_ratio_sd: float
+    shape_sd: np.ndarray
+    band: tuple[float, float]
+    level: float  # the modal response's peak spectral density on the unit shape (units^2 / Hz, one-sided)
+    warnings: list[str] = field(default_factory=list)
+
+    def to_json(self, names: tuple[str, ...]) -> dict[str, Any]:
+        return {
+            "frequency": self.frequency,
+            "frequency_interval": list(self.frequency_interval),
+            "frequency_sd": self.frequency_sd,
+            "damping_ratio": self.damping_ratio,
+            "damping_ratio_interval": list(self.damping_ratio_interval),
+            "damping_ratio_sd": self.damping_ratio_sd,
+            "shape": {n: float(v) for n, v in zip(names, self.shape, strict=True)},
+            "shape_interval": {n: [float(a), float(b)] for n, (a, b) in zip(names, self.shape_interval, strict=True)},
+            "shape_sd": {n: float(v) for n, v in zip(names, self.shape_sd, strict=True)},
+            "band": list(self.band),
+            "peak_density": self.level,
+            "warnings": list(self.warnings),
+        }
+
+
+@dataclass
+class BandFit:
+    """One band's fits over model order: for each mode count, (BIC, ln L, frequencies, damping
+    ratios); `chosen` is the order kept."""
+
+    lo: float
+    hi: float
+    ordinates: int
+    orders: dict[int, dict[str, Any]]
+    chosen: int
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "band": [self.lo, self.hi],
+            "ordinates": self.ordinates,
+            "chosen": self.chosen,
+            "orders": {str(k): v for k, v in self.orders.items()},
+        }
+
+
+@dataclass
+class OmaResult:
+    """The identification of a multi-channel record (`vibinverse.oma.identify.identify`)."""
+
+    modes: list[OmaMode]
+    names: tuple[str, ...]
+    units: tuple[str | None, ...]
+    quantity: str
+    bands: list[BandFit]
+    sv_freqs: np.ndarray
+    sv_values: np.ndarray
+    samples: int
+    fs: float
+    seconds: float
+    search: tuple[float, float] = (0.0, float("inf"))  # the band (Hz) searched for modes
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def mac(self) -> np.ndarray:
+        """MAC between the identified modes."""
+        return mac_matrix([m.shape for m in self.modes])
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "method": "bayesian-fft (multi-channel Whittle in bands) + Laplace",
+            "interval": INTERVAL,
+            "channels": list(self.names),
+            "units": list(self.units),
+            "quantity": self.quantity,
+            "samples": self.samples,
+            "fs": self.fs,
+            "seconds": self.seconds,
+            "search_band": list(self.search),
+            "modes": [m.to_json(self.names) for m in self.modes],
+            "mac": self.mac.tolist(),
+            "bands": [b.to_json() for b in self.bands],
+            "notes": list(self.notes),
+        }
+
+    def table(self) -> str:
+        """The mode table as text: f and zeta with 90 % intervals, the shape per channel."""
+        p = int(100 * INTERVAL)
+        lines = [
+            f"{len(self.modes)} mode(s) from {len(self.names)} channel(s) ({', '.join(self.names)}); {p} % intervals"
+        ]
+        for i, m in enumerate(self.modes):
+            flo, fhi = m.frequency_interval
+            zlo, zhi = m.damping_ratio_interval
+            shape = "  ".join(
+                f"{n}={v:+.3f}[{a:+.3f},{b:+.3f}]"
+                for n, v, (a, b) in zip(self.names, m.shape, m.shape_interval, strict=True)
+            )
+            lines.append(
+                f"mode {i + 1}: f = {m.frequency:.5g} Hz [{flo:.5g}, {fhi:.5g}]  zeta = {m.damping_ratio:.4f} "
+                f"[{zlo:.4f}, {zhi:.4f}]  shape: {shape}"
+            )
+            lines += [f"  warning: {w}" for w in m.warnings]
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
