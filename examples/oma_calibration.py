@@ -8,6 +8,7 @@ sets of one bench case (`vibinverse.bench.oma_bench.OMA_CASES`: shear buildings 
 N_SETS defaults to 50, CASE to three_storey; --quick uses the case's short record. Prints one JSON
 document (docs/guide/methods.md quotes it)."""
 
+# ruff: noqa: T201  (an example prints its results)
 from __future__ import annotations
 
 import json

@@ -10,8 +10,9 @@ noise (a power law: coloured sensor noise and drift over a band of +-30 %), B_j 
 the modes fitted in the other bands (held fixed; without them a tail, correlated across channels, is
 mistaken for a broad mode), and g_m the modal response's
 spectral density: the `vibinverse.terms.resonance.Oscillator` term's PSD (a white-noise-driven
-resonance, 2 kappa / |w^2 - W^2 + 2 i zeta w W|^2, kappa = 4 zeta w^3) times the modal force level
-s_m, and times W^(2p) for a channel that measures velocity (p = 1) or acceleration (p = 2)
+resonance, 2 kappa / |w^2 - W^2 + 2 i zeta w W|^2, kappa = 4 zeta w^3) times the modal force's
+spectrum s_m (f / f_m)^alpha_m (a power law across the band: coloured forcing), and times W^(2p)
+for a channel that measures velocity (p = 1) or acceleration (p = 2)
 (`QUANTITY_POWER`). Modal forces of different modes are taken as uncorrelated. Then
 
     ln L = - sum_j [ C ln pi + ln det E_j + Y_j^H E_j^{-1} Y_j ],
@@ -19,7 +20,7 @@ s_m, and times W^(2p) for a channel that measures velocity (p = 1) or accelerati
 and with R_j = Re(E_j^{-1} - E_j^{-1} Y_j Y_j^H E_j^{-1}), d ln L = - sum_j tr(R_j dE_j): the gradient in
 closed form, one batched C x C inverse per ordinate and evaluation.
 
-Parameters (the optimizer's x, all unconstrained but for bounds): per mode ln f, ln zeta, ln s; per
+Parameters (the optimizer's x, all unconstrained but for bounds): per mode ln f, ln zeta, ln s, alpha; per
 mode the shape's C - 1 free components (`BandLayout.reference`: one component held at 1 fixes the
 scale and sign, s carries the scale); per channel ln n and beta. The reported shape is phi / |phi|, signed so
 that its largest-magnitude component is positive.
@@ -131,20 +132,20 @@ class BandLayout:
 
     @property
     def size(self) -> int:
-        return 3 * self.modes + self.modes * (self.channels - 1) + 2 * self.channels
+        return 4 * self.modes + self.modes * (self.channels - 1) + 2 * self.channels
 
     def free(self, m: int) -> np.ndarray:
         """The channels whose shape components of mode m are free."""
         return np.array([c for c in range(self.channels) if c != self.reference[m]], dtype=int)
 
     def shape_slice(self, m: int) -> slice:
-        o = 3 * self.modes + m * (self.channels - 1)
+        o = 4 * self.modes + m * (self.channels - 1)
         return slice(o, o + self.channels - 1)
 
     @property
     def noise_slice(self) -> slice:
         """ln n_c, the channels' noise levels at the band's centre."""
-        o = 3 * self.modes + self.modes * (self.channels - 1)
+        o = 4 * self.modes + self.modes * (self.channels - 1)
         return slice(o, o + self.channels)
 
     @property
@@ -156,6 +157,10 @@ class BandLayout:
     def tilt(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(x[self.tilt_slice], dtype=float)
 
+    def alpha(self, x: np.ndarray) -> np.ndarray:
+        """alpha_m, each modal force's log-log slope over the band."""
+        return np.asarray(x[3 * self.modes : 4 * self.modes], dtype=float)
+
     def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(f (M,), zeta (M,), s (M,), raw shapes v (M, C) with the reference at 1, noise n (C,))."""
         m = self.modes
@@ -165,9 +170,9 @@ class BandLayout:
             v[k, self.free(k)] = x[self.shape_slice(k)]
         return f, zeta, s, v, np.exp(x[self.noise_slice])
 
-    def pack(self, f, zeta, s, v, n, tilt=None) -> np.ndarray:
-        """x from (f, zeta, s, v, n, tilt (default 0)); v is rescaled so that its reference component
-        is 1 (s takes the square of the scale)."""
+    def pack(self, f, zeta, s, v, n, tilt=None, alpha=None) -> np.ndarray:
+        """x from (f, zeta, s, v, n, tilt, alpha (both default 0)); v is rescaled so that its
+        reference component is 1 (s takes the square of the scale)."""
         x = np.empty(self.size)
         m = self.modes
         v = np.array(v, dtype=float).reshape(m, self.channels)
@@ -178,6 +183,7 @@ class BandLayout:
             v[k] = v[k] / r
             x[self.shape_slice(k)] = v[k, self.free(k)]
         x[0:m], x[m : 2 * m], x[2 * m : 3 * m] = np.log(f), np.log(zeta), np.log(s)
+        x[3 * m : 4 * m] = 0.0 if alpha is None else alpha
         x[self.noise_slice] = np.log(n)
         x[self.tilt_slice] = 0.0 if tilt is None else tilt
         return x
@@ -199,9 +205,14 @@ class BandLikelihood:
         #: ln(f / the band's geometric centre): the noise's log-log slope is about the centre
         self.log_f = np.log(self.freqs / math.sqrt(self.freqs[0] * self.freqs[-1])) if self.freqs.size else self.freqs
 
-    def densities(self, f: np.ndarray, zeta: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """(M, J): each mode's g_m at the ordinates."""
-        return np.array([s[k] * modal_density(f[k], zeta[k], self.freqs, self.power) for k in range(f.size)])
+    def densities(self, f: np.ndarray, zeta: np.ndarray, s: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+        """(M, J): each mode's g_m at the ordinates, s_m (f_j / f_m)^alpha_m times `modal_density`."""
+        return np.array(
+            [
+                s[k] * (self.freqs / f[k]) ** alpha[k] * modal_density(f[k], zeta[k], self.freqs, self.power)
+                for k in range(f.size)
+            ]
+        ).reshape(f.size, self.freqs.size)
 
     @property
     def y(self) -> np.ndarray:
@@ -221,7 +232,7 @@ class BandLikelihood:
     def covariance(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(E_j (J, C, C), g (M, J))."""
         f, zeta, s, v, n = self.layout.unpack(x)
-        g = self.densities(f, zeta, s) if f.size else np.zeros((0, self.freqs.size))
+        g = self.densities(f, zeta, s, self.layout.alpha(x))
         e = np.einsum("mj,mc,md->jcd", g, v, v)
         e[:, np.arange(n.size), np.arange(n.size)] += self.noise(x)
         if self.background is not None:
@@ -233,6 +244,7 @@ class BandLikelihood:
         dE_j/dx_a)^2): each parameter's scale for the optimizer (one evaluation's inverse)."""
         lay = self.layout
         f, zeta, _, v, _ = lay.unpack(x)
+        alpha = lay.alpha(x)
         e, g = self.covariance(x)
         einv = np.linalg.inv(e)
         out = np.empty(lay.size)
@@ -242,8 +254,10 @@ class BandLikelihood:
             ev = einv @ v[k]  # (J, C)
             q = ev @ v[k]  # v^T E^-1 v
             dlf, dlz = modal_log_slopes(f[k], zeta[k], self.freqs)
+            dlf = dlf - alpha[k]
             gq2 = (g[k] * q) ** 2
             out[k], out[m + k], out[2 * m + k] = np.sum(gq2 * dlf**2), np.sum(gq2 * dlz**2), np.sum(gq2)
+            out[3 * m + k] = np.sum(gq2 * np.log(self.freqs / f[k]) ** 2)
             shape = 2.0 * (g[k, :, None] ** 2) * (diag * q[:, None] + ev**2)
             out[lay.shape_slice(k)] = shape.sum(axis=0)[lay.free(k)]
         noise2 = (diag * self.noise(x)) ** 2
@@ -259,6 +273,7 @@ class BandLikelihood:
         """(ln L, d ln L / dx); -inf (and None) where E is not positive definite."""
         lay = self.layout
         f, zeta, _, v, _ = lay.unpack(x)
+        alpha = lay.alpha(x)
         e, g = self.covariance(x)
         r = np.empty_like(e)
         logdet, quad = ordinate_terms(e, self._yr, self._yi, r)
@@ -273,9 +288,10 @@ class BandLikelihood:
             rv = np.einsum("jcd,d->jc", r, v[k])  # R_j v
             q = rv @ v[k]  # v^T R_j v
             dlf, dlz = modal_log_slopes(f[k], zeta[k], self.freqs)
-            grad[k] = -np.sum(q * g[k] * dlf)
+            grad[k] = -np.sum(q * g[k] * (dlf - alpha[k]))
             grad[m + k] = -np.sum(q * g[k] * dlz)
             grad[2 * m + k] = -np.sum(q * g[k])
+            grad[3 * m + k] = -np.sum(q * g[k] * np.log(self.freqs / f[k]))
             grad[lay.shape_slice(k)] = -2.0 * (g[k] @ rv)[lay.free(k)]
         rn = np.einsum("jcc->jc", r) * self.noise(x)
         grad[lay.noise_slice] = -rn.sum(axis=0)

@@ -48,6 +48,9 @@ DRAWS = 4000
 MAX_TILT = 8.0  # bound of a channel noise's log-log slope across a band
 #: below this curvature (sd 5 in ln) a channel's noise level is unidentified in the band (`_modes_of`)
 FLAT_CURVATURE = 1.0 / 25.0
+#: a fitted "mode" more damped than this is the spectrum's shape (coloured excitation, a filter's
+#: roll-off, a neighbour's tail), not a structural mode: an order holding one is not chosen
+MAX_MODE_ZETA = 0.1
 PASSES = 2  # fits of every band before the order search, each with the others' modes as background
 #: a mode whose decay time 1 / (2 pi zeta f) is longer than this fraction of the record gets a warning:
 #: the ordinates are then not independent (Whittle's approximation) and intervals may be too narrow
@@ -83,6 +86,7 @@ class _Fitted:
     zeta: float
     s: float
     v: np.ndarray
+    alpha: float = 0.0
 
     @property
     def height(self) -> float:
@@ -146,7 +150,9 @@ class _BandFitter:
         self.channels = ords.y.shape[1]
         self.background = None
         if others:
-            g = np.array([o.s * modal_density(o.f, o.zeta, self.freqs, power) for o in others])
+            g = np.array(
+                [o.s * (self.freqs / o.f) ** o.alpha * modal_density(o.f, o.zeta, self.freqs, power) for o in others]
+            )
             v = np.array([o.v for o in others])
             self.background = np.einsum("mj,mc,md->jcd", g, v, v)
         self.noise0 = np.maximum(self._edge_noise(), 1e-300)
@@ -211,6 +217,7 @@ class _BandFitter:
             b[k] = (math.log(self.lo), math.log(self.hi))
             b[m + k] = (math.log(ZETA_BOUNDS[0]), math.log(ZETA_BOUNDS[1]))
             b[2 * m + k] = (x[2 * m + k] - 40.0, x[2 * m + k] + 40.0)
+            b[3 * m + k] = (-MAX_TILT, MAX_TILT)
         ns = lay.noise_slice
         for c in range(ns.start, ns.stop):
             b[c] = (x[c] - 40.0, x[c] + 40.0)
@@ -239,10 +246,10 @@ class _BandFitter:
         f, zeta, s, v, n = lay.unpack(x)
         ref = tuple(int(np.argmax(np.abs(vk))) for vk in v)
         if ref != lay.reference:
-            tilt = lay.tilt(x)
+            tilt, alpha = lay.tilt(x), lay.alpha(x)
             lay = BandLayout(lay.modes, lay.channels, ref)
             lik = BandLikelihood(self.freqs, self.y, lay, self.power, self.background)
-            x = self._maximize(lik, lay.pack(f, zeta, s, v, n, tilt), 500)
+            x = self._maximize(lik, lay.pack(f, zeta, s, v, n, tilt, alpha), 500)
         return lik, x, lik.log_likelihood(x)
 
     def _maximize(self, lik: BandLikelihood, x0: np.ndarray, maxiter: int) -> np.ndarray:
@@ -272,7 +279,7 @@ class _BandFitter:
         k = x.size
         h = np.empty((k, k))
         for i in range(k):
-            step = 1e-4 * max(1.0, abs(x[i])) if i >= 3 * lik.layout.modes else 1e-5
+            step = 1e-4 * max(1.0, abs(x[i])) if i >= 3 * lik.layout.modes else 1e-5  # ln f, ln zeta, ln s: 1e-5
             e = np.zeros(k)
             e[i] = step
             _, gp = self.log_posterior(lik, x + e)
@@ -395,7 +402,8 @@ def _starts(group: list[_Peak]) -> list[tuple[float, float]]:
 
 def _fitted(lik: BandLikelihood, x: np.ndarray) -> list[_Fitted]:
     f, zeta, s, v, _ = lik.layout.unpack(x)
-    return [_Fitted(float(f[k]), float(zeta[k]), float(s[k]), v[k].copy()) for k in range(f.size)]
+    alpha = lik.layout.alpha(x)
+    return [_Fitted(float(f[k]), float(zeta[k]), float(s[k]), v[k].copy(), float(alpha[k])) for k in range(f.size)]
 
 
 @threadpool_limits.wrap(limits=1, user_api="blas")  # C x C matrices: BLAS threads only contend
@@ -440,15 +448,18 @@ def identify(
     estimates = peaks
     for _ in range(PASSES):
         fitted: list[_Fitted] = []
+        kept: list[_Peak] = []  # peaks whose fit went broad: tried again in the order search
         for lo, hi, group in group_bands(estimates, ords.resolution, nyq):
             others = [o for o in current if not lo <= o.f <= hi]
             fitter = _BandFitter(ords, lo, hi, power, others)
             if fitter.freqs.size < MIN_ORDINATES // 2:
                 continue
             lik, x, _ = fitter.fit(_starts(group))
-            fitted += _fitted(lik, x)
+            narrow = [o for o in _fitted(lik, x) if o.zeta <= MAX_MODE_ZETA]  # a broad bump is no mode
+            fitted += narrow
+            kept += [p for p in group if all(abs(o.f - p.f) > 3 * p.zeta * p.f for o in narrow)]
         current = fitted
-        estimates = [_Peak(o.f, o.zeta, o.height) for o in current]
+        estimates = [_Peak(o.f, o.zeta, o.height) for o in current] + kept
     found: list[OmaMode] = []
     fits: list[BandFit] = []
     for lo, hi, group in group_bands(estimates, ords.resolution, nyq):
@@ -465,7 +476,16 @@ def identify(
         for m, (lik_m, x_m, ll_m) in sorted(tried.items()):
             bic = -2.0 * ll_m + lik_m.layout.size * math.log(nobs)
             fm, zm, *_ = lik_m.layout.unpack(x_m)
-            orders[m] = {"bic": bic, "log_likelihood": ll_m, "frequencies": fm.tolist(), "damping_ratios": zm.tolist()}
+            broad = bool(np.any(zm > MAX_MODE_ZETA))
+            orders[m] = {
+                "bic": bic,
+                "log_likelihood": ll_m,
+                "frequencies": fm.tolist(),
+                "damping_ratios": zm.tolist(),
+                "eligible": not broad,
+            }
+            if broad:  # a mode past MAX_MODE_ZETA stands in for the spectrum's shape: not an answer
+                continue
             if best is None or bic < best[0]:
                 best = (bic, lik_m, x_m)
         if best is None:

@@ -19,6 +19,7 @@ def _band(seed=0, modes=2, channels=4, background=False):
         rng.normal(size=(modes, channels)),
         np.full(channels, 0.01),
         np.linspace(-1.5, 2.0, channels),  # coloured channel noise
+        np.array([1.5, -2.0][:modes]),  # coloured modal forces
     )
     bg = None
     if background:
@@ -52,8 +53,12 @@ def test_log_likelihood_is_the_complex_gaussian_density():
 def test_pack_unpack_round_trip_moves_scale_into_level():
     lay = BandLayout(2, 3, (1, 0))
     v = np.array([[0.5, -2.0, 1.0], [3.0, 1.0, -1.0]])
-    x = lay.pack(np.array([1.0, 2.0]), np.array([0.01, 0.02]), np.array([1.0, 1.0]), v, np.array([1.0, 2.0, 3.0]))
+    x = lay.pack(
+        np.array([1.0, 2.0]), np.array([0.01, 0.02]), np.array([1.0, 1.0]), v, np.array([1.0, 2.0, 3.0]),
+        np.array([0.1, 0.2, 0.3]), np.array([-1.0, 2.0]),
+    )  # fmt: skip
     f, zeta, s, u, n = lay.unpack(x)
+    assert np.allclose(lay.tilt(x), [0.1, 0.2, 0.3]) and np.allclose(lay.alpha(x), [-1.0, 2.0])
     assert np.allclose(f, [1, 2]) and np.allclose(zeta, [0.01, 0.02]) and np.allclose(n, [1, 2, 3])
     # the model's s v v^T is unchanged by the gauge
     for k in range(2):
