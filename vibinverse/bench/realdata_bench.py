@@ -43,7 +43,17 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from vibinverse.bench.realdata_cases import SERIES, VIDEO, Case, CaseFile, Reference, SeriesInput, load_cases, select
+from vibinverse.bench.realdata_cases import (
+    SERIES,
+    VIDEO,
+    Case,
+    CaseFile,
+    ChannelsInput,
+    Reference,
+    SeriesInput,
+    load_cases,
+    select,
+)
 from vibinverse.imaging.line_checks import VIBRATION
 
 LOG = logging.getLogger(__name__)
@@ -314,6 +324,31 @@ def fit_series(path: str, spec: SeriesInput) -> dict[str, Any]:
     }
 
 
+def fit_channels(path: str, spec: ChannelsInput) -> dict[str, Any]:
+    """The modal identification of every response channel of a multi-channel file, as `vibinverse
+    fit TABLE` runs it (`load_channels`, `vibinverse.oma.identify`): each mode a claim with its 90 %
+    interval."""
+    from vibinverse.io.channels import Channels, load_channels
+    from vibinverse.oma import identify
+
+    ch = load_channels(path, inputs=spec.inputs)
+    if spec.skip:
+        ch = Channels(ch.time[spec.skip :], ch.values[spec.skip :], ch.names, ch.units, ch.source, inputs=ch.inputs)
+    result = identify(ch, band=spec.band)
+    claims = [
+        Claim(m.frequency, "channels", f"modes[{i}]", True, tuple(m.frequency_interval), kind="mode")
+        for i, m in enumerate(result.modes)
+    ]
+    return {
+        "claims": [dataclasses.asdict(c) for c in claims],
+        "fs": float(result.fs),
+        "duration_s": float(ch.time[-1] - ch.time[0]),
+        "n_samples": int(ch.time.size),
+        "note": f"{', '.join(result.names)}: load_channels; {spec.note}",
+        "approximation": "bayesian-fft + Laplace",
+    }
+
+
 # ------------------------------------------------------------------------ processes with a limit
 @dataclass(frozen=True)
 class Step:
@@ -493,7 +528,17 @@ class SeriesRunner:
         res = yield Step(
             "fit", fit_series, (str(file.path), file.series), settings.fit_limit_s, f"{case.id} {file.label}"
         )
-        return [_row(case, file, "fit", res)]
+        rows = [_row(case, file, "fit", res)]
+        if file.channels is not None:  # and all its channels together: `vibinverse fit TABLE`
+            res = yield Step(
+                "channels",
+                fit_channels,
+                (str(file.path), file.channels),
+                settings.fit_limit_s,
+                f"{case.id} {file.label}",
+            )
+            rows.append(_row(case, file, "channels", res))
+        return rows
 
 
 #: a case's runner, by its kind

@@ -8,6 +8,8 @@ What cases.json does not say is kept here, as data:
 
 - `SERIES_INPUTS`: per series case, the channel a user would fit (the column or
   array name), a time column, and samples to drop at the start;
+- `CHANNEL_INPUTS`: per multi-channel case, how its channels are fitted together (measured inputs,
+  samples to drop, the band searched);
 - `EXTRA_CONTEXT`: frequencies that CASES.md names as seen in the data but not as references
   (the footbridge's 17.5 Hz secondary peak, the slab's 17.0 Hz peak, ...). Like the references
   marked `"check": false`, they are not scored (never missed) but explain a claim.
@@ -76,6 +78,7 @@ class CaseFile:
     duration_s: float | None = None
     tolerance_hz: float | None = None
     series: SeriesInput | None = None
+    channels: ChannelsInput | None = None
     label: str = ""  # short name in tables: its folder when that tells the case's files apart, else its stem
 
     @property
@@ -115,6 +118,26 @@ SERIES_INPUTS: dict[str, SeriesInput] = {
     ),
     "footbridge_impulse_3ch": SeriesInput("Acceleration_0", note="Acceleration_0 [g]"),
 }
+
+
+@dataclass(frozen=True)
+class ChannelsInput:
+    """How a user reads a multi-channel file (`load_channels`) for `vibinverse fit TABLE`: the
+    channels that are measured inputs, the leading samples to drop, the band searched (None: all),
+    and a note."""
+
+    inputs: tuple[str, ...] = ()
+    skip: int = 0
+    band: tuple[float, float] | None = None
+    note: str = ""
+
+
+#: per multi-channel case, the modal identification of all its response channels (`fit TABLE`)
+CHANNEL_INPUTS: dict[str, ChannelsInput] = {
+    "footbridge_impulse_3ch": ChannelsInput(band=(5.0, 100.0), note="3 accelerometers, 5-100 Hz"),
+    "slab_smartphone_walking": ChannelsInput(skip=2000, note="X, Y, Z, first 2000 samples dropped"),
+}
+
 
 #: cases whose references the tool is not expected to reach from the channel it is given
 EXPECTED_FAILURES: dict[str, str] = {
@@ -208,6 +231,7 @@ def _files(case: dict[str, Any], root: Path, kind: str, tolerance: float | None)
                 duration_s=duration,
                 tolerance_hz=tol,
                 series=SERIES_INPUTS.get(case["id"]) if kind == SERIES else None,
+                channels=CHANNEL_INPUTS.get(case["id"]) if kind == SERIES else None,
             )
         )
     parents = [f.path.parent.name for f in files]

@@ -368,6 +368,19 @@ def _second_peak(fitter: _BandFitter, taken: list[float]) -> float:
     return float(fitter.freqs[order[0]])
 
 
+def _worst_fitted(fitter: _BandFitter, lik: BandLikelihood, x: np.ndarray, taken: list[float]) -> float:
+    """Where the fit falls shortest: the peak of sum_c |Y_jc|^2 / E_jcc (smoothed over 5 ordinates)
+    away from the modes already there (two modes of one shape, which the second eigenvalue misses)."""
+    e, _ = lik.covariance(x)
+    ratio = (np.abs(fitter.y) ** 2 / np.einsum("jcc->jc", e)).sum(axis=1)
+    smooth = np.convolve(ratio, np.ones(5) / 5.0, "same") if ratio.size >= 5 else ratio
+    df = fitter.freqs[1] - fitter.freqs[0] if fitter.freqs.size > 1 else 0.0
+    for j in np.argsort(smooth)[::-1]:
+        if all(abs(fitter.freqs[j] - t) > 2 * df for t in taken):
+            return float(fitter.freqs[j])
+    return float(fitter.freqs[int(np.argmax(smooth))])
+
+
 def _order_fits(
     fitter: _BandFitter, starts: list[tuple[float, float]], counts: list[int]
 ) -> dict[int, tuple[BandLikelihood, np.ndarray, float]]:
@@ -378,11 +391,14 @@ def _order_fits(
     out: dict[int, tuple[BandLikelihood, np.ndarray, float]] = {}
     for m in counts:
         if m <= len(starts):
-            st = starts[:m]
-        else:
-            extra = (_second_peak(fitter, [p[0] for p in starts]), float(np.median([p[1] for p in starts])))
-            st = starts + [extra]
-        fit = fitter.fit(st)
+            fits = [fitter.fit(starts[:m])]
+        else:  # an added mode: where the second eigenvalue peaks, and where the last fit falls shortest
+            zeta = float(np.median([p[1] for p in starts]))
+            where = {_second_peak(fitter, [p[0] for p in starts])}
+            if m - 1 in out:
+                where.add(_worst_fitted(fitter, *out[m - 1][:2], [p[0] for p in starts]))
+            fits = [fitter.fit([*starts, (f, zeta)]) for f in sorted(where)]
+        fit = max(fits, key=lambda t: t[2] if math.isfinite(t[2]) else -math.inf)
         if math.isfinite(fit[2]):
             out[m] = fit
     for m in sorted(out, reverse=True):
