@@ -72,3 +72,14 @@ def test_the_real_data_page_shows_the_table_of_its_bench_json():
     result = json.loads(pages.REALDATA_JSON.read_text())
     assert pages.table_block(result) in pages.REALDATA_PAGE.read_text()
     assert not any("/work/" in r.get("path", "") for r in result["rows"])  # no machine's directories
+
+
+def test_the_oma_page_shows_the_table_of_its_bench_json():
+    """docs/validation/oma.md's table is the one docs/validation/oma_quick.json gives (`update_pages.py`)."""
+    import json
+
+    spec = importlib.util.spec_from_file_location("update_pages", ROOT / "docs" / "validation" / "update_pages.py")
+    pages = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(pages)
+    result = json.loads(pages.OMA_JSON.read_text())
+    assert pages.oma_block(result) in pages.OMA_PAGE.read_text()

@@ -2,11 +2,13 @@
 no number on them is typed by hand:
 
     vibinverse bench --realdata --quick -o bench
+    vibinverse bench --oma --quick -o bench
     python docs/validation/update_pages.py bench
 
 writes docs/validation/realdata_quick.json (the bench's rows, paths relative to the corpus),
-realdata_quick.png (its figure) and the table of realdata.md between its two markers.
-tests/test_docs.py checks that the page's table is the one its JSON gives."""
+realdata_quick.png (its figure) and the table of realdata.md between its two markers; likewise
+oma_quick.json, oma_quick.png and oma.md's table from oma.json. tests/test_docs.py checks that each
+page's table is the one its JSON gives."""
 
 from __future__ import annotations
 
@@ -22,6 +24,8 @@ REALDATA_PAGE = HERE / "realdata.md"
 REALDATA_JSON = HERE / "realdata_quick.json"
 REALDATA_FIGURE = HERE / "realdata_quick.png"
 BEGIN, END = "<!-- realdata table: update_pages.py -->", "<!-- end of the realdata table -->"
+OMA_PAGE, OMA_JSON, OMA_FIGURE = HERE / "oma.md", HERE / "oma_quick.json", HERE / "oma_quick.png"
+OMA_BEGIN, OMA_END = "<!-- oma table: update_pages.py -->", "<!-- end of the oma table -->"
 
 
 def relative(result: dict[str, Any]) -> dict[str, Any]:
@@ -59,7 +63,38 @@ def update_realdata(bench_dir: Path) -> None:
     REALDATA_PAGE.write_text(head + table_block(result) + tail)
 
 
+def oma_block(result: dict[str, Any]) -> str:
+    """oma.md's block: the markers around the OMA bench's table."""
+    from vibinverse.bench.oma_bench import table as oma_table
+
+    return f"{OMA_BEGIN}\n```\n{oma_table(result)}\n```\n{OMA_END}"
+
+
+def update_oma(bench_dir: Path) -> None:
+    """oma_quick.json, oma_quick.png and oma.md's table from bench_dir/oma.json."""
+    from vibinverse.bench.oma_bench import plot as oma_plot
+
+    result = json.loads((bench_dir / "oma.json").read_text())
+    page = OMA_PAGE.read_text()
+    if page.count(OMA_BEGIN) != 1 or page.count(OMA_END) != 1:
+        raise SystemExit(f"update_pages: {OMA_PAGE} needs the markers {OMA_BEGIN!r} and {OMA_END!r} once each")
+    head, rest = page.split(OMA_BEGIN)
+    tail = rest.split(OMA_END, 1)[1]
+    OMA_JSON.write_text(json.dumps(result, indent=1) + "\n")
+    oma_plot(result, OMA_FIGURE)
+    OMA_PAGE.write_text(head + oma_block(result) + tail)
+
+
 if __name__ == "__main__":
     if len(sys.argv) != 2:
         raise SystemExit("usage: python docs/validation/update_pages.py BENCH_DIR")
-    update_realdata(Path(sys.argv[1]))
+    bench = Path(sys.argv[1])
+    done = []
+    if (bench / "realdata.json").is_file():
+        update_realdata(bench)
+        done.append("realdata")
+    if (bench / "oma.json").is_file():
+        update_oma(bench)
+        done.append("oma")
+    if not done:
+        raise SystemExit(f"update_pages: neither realdata.json nor oma.json in {bench}; run `vibinverse bench` first")
