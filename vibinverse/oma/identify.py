@@ -37,11 +37,21 @@ from vibinverse.oma.spectral_matrix import Ordinates, SingularValues, ordinates,
 
 log = logging.getLogger(__name__)
 
-PROMINENCE = 1.0  # ln units: a peak e times its surroundings
+PROMINENCE = 1.0  # ln units: a peak e times its surroundings (`local_baseline`)
+BASELINE_WIDTH = 0.25  # the surroundings: +-25 % in frequency
+BASELINE_GRID = 2000
+SMOOTH_WIDTH = 0.005  # the singular value's moving average (+-, relative) before its peaks are read
+BASELINE_BINS = 15  # the surroundings span at least +-this many frequencies (short records)
+#: the least damping ratio a peak's fit starts from: from a spike-narrow start the optimizer stays on
+#: a periodogram spike beside the mode; from a broad one it narrows onto the mode
+START_ZETA = 0.01
+BROAD_START = 3.0  # every fit is also started from this many times its damping ratios
 MAX_BANDS = 12
 MIN_CYCLES = 10.0
 BAND_WIDTHS = 6.0
 MAX_BAND_ZETA = 0.05  # a band is never wider than +-BAND_WIDTHS x this, relative
+#: nor narrower than +-BAND_WIDTHS x this: a fit that went to a spike beside the mode must still see it
+MIN_BAND_ZETA = 0.002
 MIN_ORDINATES = 16
 MAX_MODES_PER_BAND = 3
 DRAWS = 4000
@@ -87,10 +97,19 @@ class _Fitted:
     s: float
     v: np.ndarray
     alpha: float = 0.0
+    band: tuple[float, float] = (0.0, math.inf)  # where it was fitted: its force's power law holds there
+
+    def density(self, freqs: np.ndarray, power: int) -> np.ndarray:
+        """Its spectral density at `freqs`; outside its band the force is held at the band edge's level
+        (the power law fitted across +-30 % is no model of the force far away)."""
+        held = np.clip(freqs, *self.band)
+        return self.s * (held / self.f) ** self.alpha * modal_density(self.f, self.zeta, freqs, power)
 
     @property
     def height(self) -> float:
-        return float(self.s * self.v @ self.v / self.zeta)
+        """Its strength: the modal response's variance over the channels (the unit-rms density's
+        integral is 1), not its peak (a spike's peak is high and its variance small)."""
+        return float(self.s * self.v @ self.v)
 
 
 @dataclass
@@ -100,31 +119,69 @@ class _Peak:
     prominence: float
 
 
+def local_baseline(freqs: np.ndarray, log_s: np.ndarray) -> np.ndarray:
+    """The running median of log_s over +-BASELINE_WIDTH (relative) in frequency, or +-BASELINE_BINS
+    where that is wider, at every frequency (evaluated at up to BASELINE_GRID frequencies and
+    interpolated): a peak's height above it does not grow with the record's length, as a prominence
+    over the deepest valley of thousands of noisy bins does."""
+    n = freqs.size
+    df = freqs[1] - freqs[0] if n > 1 else 1.0
+    at = np.unique(np.geomspace(1, n, min(n, BASELINE_GRID)).astype(int) - 1)
+    half = np.maximum(BASELINE_BINS, (BASELINE_WIDTH * freqs[at] / df).astype(int))
+    base = np.array([np.median(log_s[max(0, i - h) : i + h + 1]) for i, h in zip(at, half, strict=True)])
+    return np.interp(np.arange(n), at, base)
+
+
+def relative_smooth(freqs: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """values averaged over +-SMOOTH_WIDTH (relative) of each frequency (at least the bin itself):
+    the ragged top of a long record's Welch peak evened, a short record's few bins left alone."""
+    df = freqs[1] - freqs[0] if freqs.size > 1 else 1.0
+    half = (SMOOTH_WIDTH * freqs / df).astype(int)
+    c = np.r_[0.0, np.cumsum(values)]
+    i = np.arange(freqs.size)
+    lo, hi = np.maximum(i - half, 0), np.minimum(i + half + 1, freqs.size)
+    return (c[hi] - c[lo]) / (hi - lo)
+
+
 def pick_peaks(sv: SingularValues, span: float, count: int | None) -> list[_Peak]:
     """The first singular value's peaks (module docstring, stage 1), strongest first."""
-    s1 = np.log(np.maximum(sv.values[:, 0], 1e-300))
+    # Welch's 15 segments leave a long record's peak top ragged, and a width read on a noise spike
+    # sets a band too narrow for the mode under it: averaged over +-SMOOTH_WIDTH first
+    smooth = relative_smooth(sv.freqs, sv.values[:, 0])
+    s1 = np.log(np.maximum(smooth, 1e-300))
     df = sv.freqs[1] - sv.freqs[0]
     lo = MIN_CYCLES / span
-    idx, props = signal.find_peaks(s1, prominence=PROMINENCE if count is None else 0.05)
-    keep = sv.freqs[idx] >= max(lo, 2 * df)
-    idx, prom = idx[keep], props["prominences"][keep]
-    order = np.argsort(prom)[::-1][: count if count is not None else MAX_BANDS]
-    peaks = []
+    idx, _ = signal.find_peaks(s1)
+    prom_all = s1 - local_baseline(sv.freqs, s1)
+    keep = (sv.freqs[idx] >= max(lo, 2 * df)) & (prom_all[idx] >= (PROMINENCE if count is None else 0.05))
+    idx = idx[keep]
+    prom = prom_all[idx]
+    order = np.argsort(prom)[::-1]
+    wanted = count if count is not None else MAX_BANDS
+    peaks: list[_Peak] = []
+    spans: list[tuple[float, float]] = []
     for i, p in zip(idx[order], prom[order], strict=True):
+        if any(a <= sv.freqs[i] <= b for a, b in spans):
+            continue  # a ripple on a stronger peak's top: the order search finds a second mode there
         half = s1[i] - math.log(2.0)
         a, b = i, i
         while a > 0 and s1[a] > half:
             a -= 1
         while b < s1.size - 1 and s1[b] > half:
             b += 1
-        width = max((sv.freqs[b] - sv.freqs[a]) / 2.0 - df, df / 2.0)  # less the Hann window's own width
-        zeta = float(np.clip(width / sv.freqs[i], 2e-3, 0.2))
+        spans.append((float(sv.freqs[a]), float(sv.freqs[b])))
+        smear = df + SMOOTH_WIDTH * sv.freqs[i]  # the Hann window's and the smoothing's own widths
+        width = max((sv.freqs[b] - sv.freqs[a]) / 2.0 - smear, df / 2.0)
+        zeta = float(np.clip(width / sv.freqs[i], START_ZETA, 0.2))
         peaks.append(_Peak(float(sv.freqs[i]), zeta, float(p)))
+        if len(peaks) == wanted:
+            break
     return peaks
 
 
 def _band_of(p: _Peak, resolution: float) -> tuple[float, float]:
-    half = max(BAND_WIDTHS * min(p.zeta, MAX_BAND_ZETA) * p.f, MIN_ORDINATES / 2 * resolution)
+    zeta = min(max(p.zeta, MIN_BAND_ZETA), MAX_BAND_ZETA)
+    half = max(BAND_WIDTHS * zeta * p.f, MIN_ORDINATES / 2 * resolution)
     return max(p.f - half, resolution / 2), p.f + half
 
 
@@ -150,9 +207,7 @@ class _BandFitter:
         self.channels = ords.y.shape[1]
         self.background = None
         if others:
-            g = np.array(
-                [o.s * (self.freqs / o.f) ** o.alpha * modal_density(o.f, o.zeta, self.freqs, power) for o in others]
-            )
+            g = np.array([o.density(self.freqs, power) for o in others])
             v = np.array([o.v for o in others])
             self.background = np.einsum("mj,mc,md->jcd", g, v, v)
         self.noise0 = np.maximum(self._edge_noise(), 1e-300)
@@ -163,6 +218,7 @@ class _BandFitter:
         k = max(2, j // 10)
         edge = np.r_[self.y[:k], self.y[-k:]]
         level = np.median(np.abs(edge) ** 2, axis=0) / math.log(2.0)  # median of an exponential -> its mean
+        level = np.maximum(level, 1e-10 * max(float(level.max()), 1e-300))  # a silent channel: a tiny floor
         if self.background is not None:
             tails = np.einsum("jcc->jc", np.r_[self.background[:k], self.background[-k:]])
             level = np.maximum(level - np.median(tails, axis=0), 0.05 * level)
@@ -238,7 +294,15 @@ class _BandFitter:
         return v + float(np.sum(x[:m])), g
 
     def fit(self, peaks: list[tuple[float, float]]) -> tuple[BandLikelihood, np.ndarray, float]:
-        """(likelihood, MAP x, ln L at it) from starts at `peaks`."""
+        """(likelihood, MAP x, ln L at it): the better of the fits from `peaks` and from the same
+        frequencies with BROAD_START times the damping (a lightly damped mode's likelihood has
+        local optima on periodogram spikes; from a broad start the fit narrows onto the mode)."""
+        fits = [self._fit_from(peaks)]
+        if peaks:
+            fits.append(self._fit_from([(f, min(BROAD_START * max(z, START_ZETA), MAX_BAND_ZETA)) for f, z in peaks]))
+        return max(fits, key=lambda t: t[2] if math.isfinite(t[2]) else -math.inf)
+
+    def _fit_from(self, peaks: list[tuple[float, float]]) -> tuple[BandLikelihood, np.ndarray, float]:
         lay, x0 = self.start(peaks)
         lik = BandLikelihood(self.freqs, self.y, lay, self.power, self.background)
         x = self._maximize(lik, x0, 2000)
@@ -419,7 +483,10 @@ def _starts(group: list[_Peak]) -> list[tuple[float, float]]:
 def _fitted(lik: BandLikelihood, x: np.ndarray) -> list[_Fitted]:
     f, zeta, s, v, _ = lik.layout.unpack(x)
     alpha = lik.layout.alpha(x)
-    return [_Fitted(float(f[k]), float(zeta[k]), float(s[k]), v[k].copy(), float(alpha[k])) for k in range(f.size)]
+    band = (float(lik.freqs[0]), float(lik.freqs[-1]))
+    return [
+        _Fitted(float(f[k]), float(zeta[k]), float(s[k]), v[k].copy(), float(alpha[k]), band) for k in range(f.size)
+    ]
 
 
 @threadpool_limits.wrap(limits=1, user_api="blas")  # C x C matrices: BLAS threads only contend
@@ -492,7 +559,9 @@ def identify(
         for m, (lik_m, x_m, ll_m) in sorted(tried.items()):
             bic = -2.0 * ll_m + lik_m.layout.size * math.log(nobs)
             fm, zm, *_ = lik_m.layout.unpack(x_m)
-            broad = bool(np.any(zm > MAX_MODE_ZETA))
+            # a "mode" past MAX_MODE_ZETA stands in for the spectrum's shape; one whose half-power
+            # width 2 zeta f is below the ordinates' spacing is a spike (or a line), not a resolved mode
+            broad = bool(np.any(zm > MAX_MODE_ZETA)) or bool(np.any(2.0 * zm * fm < ords.resolution))
             orders[m] = {
                 "bic": bic,
                 "log_likelihood": ll_m,
@@ -500,7 +569,7 @@ def identify(
                 "damping_ratios": zm.tolist(),
                 "eligible": not broad,
             }
-            if broad:  # a mode past MAX_MODE_ZETA stands in for the spectrum's shape: not an answer
+            if broad:
                 continue
             if best is None or bic < best[0]:
                 best = (bic, lik_m, x_m)
