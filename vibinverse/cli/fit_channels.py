@@ -1,7 +1,7 @@
 """`vibinverse fit TABLE` of a table with several value columns: operational modal analysis
 (`vibinverse.oma.identify`): frequencies, damping ratios and unit mode shapes with 90 % intervals,
 the MAC matrix and the stabilization-style diagram. Writes summary.json (the identification), modes.csv
-(one row per mode) and oma.png. `cmd_fit` (vibinverse.cli.commands) calls in here when the table holds
+(one row per mode), oma.png and report.html. `cmd_fit` (vibinverse.cli.commands) calls in here when the table holds
 several channels (or --channels is given); the options are added by `add_channel_options`."""
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from vibinverse.io.file_basics import csv_cell
 
 logger = logging.getLogger("vibinverse")
 
-MODES_CSV, FIGURE, SUMMARY = "modes.csv", "oma.png", "summary.json"
+MODES_CSV, FIGURE, SUMMARY, REPORT = "modes.csv", "oma.png", "summary.json", "report.html"
 #: options of the multi-channel fit only
 CHANNEL_OPTIONS = ("channels", "inputs", "geometry", "quantity")
 #: the --method values a multi-channel fit accepts: its one estimator (Bayesian FFT + Laplace)
@@ -37,7 +37,7 @@ def add_channel_options(parser: argparse.ArgumentParser) -> None:
         metavar="all|A,B,C",
         help="a table with several value columns (CSV/TSV/Parquet, .npy N x (1 + C), .npz, netCDF (time, channel), "
         "lvm, TDMS, .mat, UFF 58): fit these channels together (default: all of them): operational modal "
-        f"analysis, writing {SUMMARY}, {MODES_CSV} and {FIGURE}",
+        f"analysis, writing {SUMMARY}, {MODES_CSV}, {FIGURE} and {REPORT}",
     )
     parser.add_argument(
         "--input",
@@ -113,6 +113,7 @@ def fit_channels(args: argparse.Namespace, channels: Channels) -> dict[str, Any]
     """Identify the modes of `channels` and write the outputs (module docstring)."""
     from vibinverse.oma import identify
     from vibinverse.oma.plots import plot_oma
+    from vibinverse.oma.report import write_oma_report
 
     for name in SERIES_ONLY:
         value = getattr(args, name, None)
@@ -124,7 +125,7 @@ def fit_channels(args: argparse.Namespace, channels: Channels) -> dict[str, Any]
             "a Laplace posterior; allowed: auto, spectral"
         )
     out = output_dir(args.output)
-    files = {n: out / n for n in (SUMMARY, MODES_CSV, FIGURE)}
+    files = {n: out / n for n in (SUMMARY, MODES_CSV, FIGURE, REPORT)}
     check_paths({f"-o {n}": p for n, p in files.items()}, {"data": args.data, "--geometry": args.geometry})
     logger.info(f"data: {channels.describe()}")
     for note in channels.notes:
@@ -147,6 +148,7 @@ def fit_channels(args: argparse.Namespace, channels: Channels) -> dict[str, Any]
                 files[SUMMARY]: lambda p: p.write_text(jsonio.dumps(doc, indent=2)),
                 files[MODES_CSV]: lambda p: _write_modes(p, result),
                 files[FIGURE]: lambda p: plot_oma(result, p),
+                files[REPORT]: lambda p: write_oma_report(result, p, str(args.data)),
             }
         )
     for line in result.table().splitlines():

@@ -45,6 +45,8 @@ def test_a_table_of_channels_gives_modes_shapes_and_files(table, tmp_path, capsy
     rows = list(csv.reader((out / "modes.csv").open()))
     assert rows[0][:3] == ["mode", "frequency_hz", "frequency_q05"] and len(rows) == 3
     assert (out / "oma.png").stat().st_size > 10_000
+    page = (out / "report.html").read_text()
+    assert "<h2>Modes</h2>" in page and "roof" in page and "data:image/png;base64," in page
 
 
 def test_an_input_channel_is_left_out_of_the_responses(table, tmp_path, capsys):

@@ -108,3 +108,14 @@ def test_quantity_read_from_units():
     assert quantity_of(("g", "g", "g")) == "acceleration"
     assert quantity_of((None, None)) == "acceleration"
     assert quantity_of(("m", "m/s")) == "acceleration"  # mixed: the common OMA sensor
+
+
+def test_the_report_escapes_channel_names(three_modes):
+    import dataclasses
+
+    from vibinverse.oma.report import oma_html
+
+    named = dataclasses.replace(three_modes, names=("<script>x</script>", "b", "c", "d"))
+    page = oma_html(named, "a<b>.csv")
+    assert "<script>x" not in page and "&lt;script&gt;x&lt;/script&gt;" in page
+    assert "<title>vibinverse modal identification: a&lt;b&gt;.csv</title>" in page
