@@ -61,7 +61,7 @@ FLAT_CURVATURE = 1.0 / 25.0
 #: a fitted "mode" more damped than this is the spectrum's shape (coloured excitation, a filter's
 #: roll-off, a neighbour's tail), not a structural mode: an order holding one is not chosen
 MAX_MODE_ZETA = 0.1
-PASSES = 2  # fits of every band before the order search, each with the others' modes as background
+PASSES = 1  # fits of every band before the order search, whose modes are the other bands' background
 #: a mode whose decay time 1 / (2 pi zeta f) is longer than this fraction of the record gets a warning:
 #: the ordinates are then not independent (Whittle's approximation) and intervals may be too narrow
 DECAY_FRACTION = 0.05
@@ -293,12 +293,13 @@ class _BandFitter:
         g[:m] += 1.0
         return v + float(np.sum(x[:m])), g
 
-    def fit(self, peaks: list[tuple[float, float]]) -> tuple[BandLikelihood, np.ndarray, float]:
-        """(likelihood, MAP x, ln L at it): the better of the fits from `peaks` and from the same
-        frequencies with BROAD_START times the damping (a lightly damped mode's likelihood has
-        local optima on periodogram spikes; from a broad start the fit narrows onto the mode)."""
+    def fit(self, peaks: list[tuple[float, float]], broad: bool = False) -> tuple[BandLikelihood, np.ndarray, float]:
+        """(likelihood, MAP x, ln L at it) from `peaks`; with `broad` the better of that and the fit
+        from the same frequencies with BROAD_START times the damping (a lightly damped mode's
+        likelihood has local optima on periodogram spikes; from a broad start the fit narrows onto
+        the mode): for starts read off the spectrum, not for fitted ones."""
         fits = [self._fit_from(peaks)]
-        if peaks:
+        if peaks and broad:
             fits.append(self._fit_from([(f, min(BROAD_START * max(z, START_ZETA), MAX_BAND_ZETA)) for f, z in peaks]))
         return max(fits, key=lambda t: t[2] if math.isfinite(t[2]) else -math.inf)
 
@@ -537,7 +538,7 @@ def identify(
             fitter = _BandFitter(ords, lo, hi, power, others)
             if fitter.freqs.size < MIN_ORDINATES // 2:
                 continue
-            lik, x, _ = fitter.fit(_starts(group))
+            lik, x, _ = fitter.fit(_starts(group), broad=True)
             narrow = [o for o in _fitted(lik, x) if o.zeta <= MAX_MODE_ZETA]  # a broad bump is no mode
             fitted += narrow
             kept += [p for p in group if all(abs(o.f - p.f) > 3 * p.zeta * p.f for o in narrow)]
