@@ -69,21 +69,39 @@ def modal_log_slopes(f_mode: float, zeta: float, freqs: np.ndarray) -> tuple[np.
 
 
 @njit(cache=True, fastmath=False, nogil=True)
-def ordinate_terms(e, yr, yi, r):  # pragma: no cover - compiled
-    """For each ordinate j: Cholesky E_j = L L^T (real symmetric), ln det E_j, the quadratic form
-    Y_j^H E_j^{-1} Y_j (Y = yr + i yi) and R_j = E_j^{-1} - Re(u u^H), u = E_j^{-1} Y_j, written into
-    r. Returns (sum ln det, sum quadratic form), or (nan, nan) where an E_j is not positive definite.
-    A loop over small C x C matrices: ~20x faster than numpy's batched inverse at C = 3."""
-    nj, c = e.shape[0], e.shape[1]
+def band_terms(g, v, noise, bg, yr, yi, q, rvg, rdiag):  # pragma: no cover - compiled
+    """One pass over the ordinates j: E_j = sum_m g[m, j] v_m v_m^T + diag(noise[j]) (+ bg[j] when
+    bg has rows), its Cholesky factor, ln det E_j, the quadratic form Y_j^H E_j^{-1} Y_j (Y = yr + i
+    yi) and, with R_j = E_j^{-1} - Re(u u^H), u = E_j^{-1} Y_j, the gradient's pieces: q[m, j] =
+    v_m^T R_j v_m, rvg[m] = sum_j g[m, j] R_j v_m and rdiag[j] = diag R_j. Returns (sum ln det, sum
+    quadratic form), or (nan, nan) where an E_j is not positive definite. Small C x C matrices in a
+    compiled loop: ~10x faster than numpy's batched linear algebra and einsum at C = 3."""
+    nm, nj = g.shape[0], g.shape[1]
+    c = v.shape[1]
+    e = np.empty((c, c))
     low = np.empty((c, c))
     inv = np.empty((c, c))
+    r = np.empty((c, c))
     ur = np.empty(c)
     ui = np.empty(c)
+    rv = np.empty(c)
+    has_bg = bg.shape[0] > 0
     logdet, quad = 0.0, 0.0
+    for m in range(nm):
+        for a in range(c):
+            rvg[m, a] = 0.0
     for j in range(nj):
         for a in range(c):
             for b in range(a + 1):
-                acc = e[j, a, b]
+                acc = bg[j, a, b] if has_bg else 0.0
+                for m in range(nm):
+                    acc += g[m, j] * v[m, a] * v[m, b]
+                if a == b:
+                    acc += noise[j, a]
+                e[a, b] = acc
+        for a in range(c):
+            for b in range(a + 1):
+                acc = e[a, b]
                 for k in range(b):
                     acc -= low[a, k] * low[b, k]
                 if a == b:
@@ -94,30 +112,43 @@ def ordinate_terms(e, yr, yi, r):  # pragma: no cover - compiled
                     low[a, b] = acc / low[b, b]
         for a in range(c):
             logdet += 2.0 * math.log(low[a, a])
-        # inverse of L (lower triangular), then E^-1 = L^-T L^-1
-        for col in range(c):
+        for col in range(c):  # L^-1, lower triangular
             for a in range(c):
+                if a < col:
+                    inv[a, col] = 0.0
+                    continue
                 acc = 1.0 if a == col else 0.0
-                for k in range(a):
+                for k in range(col, a):
                     acc -= low[a, k] * inv[k, col]
-                inv[a, col] = acc / low[a, a] if a >= col else 0.0
-        for a in range(c):
+                inv[a, col] = acc / low[a, a]
+        for a in range(c):  # E^-1 = L^-T L^-1
             for b in range(a + 1):
                 acc = 0.0
                 for k in range(a, c):
                     acc += inv[k, a] * inv[k, b]
-                r[j, a, b] = acc
-                r[j, b, a] = acc
+                r[a, b] = acc
+                r[b, a] = acc
         for a in range(c):
             sr, si = 0.0, 0.0
             for b in range(c):
-                sr += r[j, a, b] * yr[j, b]
-                si += r[j, a, b] * yi[j, b]
+                sr += r[a, b] * yr[j, b]
+                si += r[a, b] * yi[j, b]
             ur[a], ui[a] = sr, si
             quad += yr[j, a] * sr + yi[j, a] * si
         for a in range(c):
             for b in range(c):
-                r[j, a, b] -= ur[a] * ur[b] + ui[a] * ui[b]
+                r[a, b] -= ur[a] * ur[b] + ui[a] * ui[b]
+            rdiag[j, a] = r[a, a]
+        for m in range(nm):
+            qq = 0.0
+            for a in range(c):
+                acc = 0.0
+                for b in range(c):
+                    acc += r[a, b] * v[m, b]
+                rv[a] = acc
+                qq += v[m, a] * acc
+                rvg[m, a] += g[m, j] * acc
+            q[m, j] = qq
     return logdet, quad
 
 
@@ -233,7 +264,10 @@ class BandLikelihood:
         """(E_j (J, C, C), g (M, J))."""
         f, zeta, s, v, n = self.layout.unpack(x)
         g = self.densities(f, zeta, s, self.layout.alpha(x))
-        e = np.einsum("mj,mc,md->jcd", g, v, v)
+        c = v.shape[1]
+        e = np.zeros((self.freqs.size, c, c))
+        for k in range(f.size):  # a few modes: broadcast products beat einsum's general loop 5x
+            e += g[k][:, None, None] * np.outer(v[k], v[k])[None, :, :]
         e[:, np.arange(n.size), np.arange(n.size)] += self.noise(x)
         if self.background is not None:
             e += self.background
@@ -275,28 +309,29 @@ class BandLikelihood:
     def value_and_gradient(self, x: np.ndarray, gradient: bool = True) -> tuple[float, np.ndarray | None]:
         """(ln L, d ln L / dx); -inf (and None) where E is not positive definite."""
         lay = self.layout
-        f, zeta, _, v, _ = lay.unpack(x)
+        f, zeta, s, v, _ = lay.unpack(x)
         alpha = lay.alpha(x)
-        e, g = self.covariance(x)
-        r = np.empty_like(e)
-        logdet, quad = ordinate_terms(e, self._yr, self._yi, r)
+        g = self.densities(f, zeta, s, alpha)
+        noise = self.noise(x)
+        m, nj = lay.modes, self.freqs.size
+        q, rvg, rdiag = np.empty((m, nj)), np.empty((m, lay.channels)), np.empty((nj, lay.channels))
+        bg = self.background if self.background is not None else np.empty((0, 0, 0))
+        logdet, quad = band_terms(g, np.ascontiguousarray(v), noise, bg, self._yr, self._yi, q, rvg, rdiag)
         value = self.const - logdet - quad
         if not math.isfinite(value):
             return -math.inf, None
         if not gradient:
             return float(value), None
         grad = np.empty(lay.size)
-        m = lay.modes
         for k in range(m):
-            rv = np.einsum("jcd,d->jc", r, v[k])  # R_j v
-            q = rv @ v[k]  # v^T R_j v
             dlf, dlz = modal_log_slopes(f[k], zeta[k], self.freqs)
-            grad[k] = -np.sum(q * g[k] * (dlf - alpha[k]))
-            grad[m + k] = -np.sum(q * g[k] * dlz)
-            grad[2 * m + k] = -np.sum(q * g[k])
-            grad[3 * m + k] = -np.sum(q * g[k] * np.log(self.freqs / f[k]))
-            grad[lay.shape_slice(k)] = -2.0 * (g[k] @ rv)[lay.free(k)]
-        rn = np.einsum("jcc->jc", r) * self.noise(x)
+            qg = q[k] * g[k]
+            grad[k] = -np.sum(qg * (dlf - alpha[k]))
+            grad[m + k] = -np.sum(qg * dlz)
+            grad[2 * m + k] = -np.sum(qg)
+            grad[3 * m + k] = -np.sum(qg * np.log(self.freqs / f[k]))
+            grad[lay.shape_slice(k)] = -2.0 * rvg[k][lay.free(k)]
+        rn = rdiag * noise
         grad[lay.noise_slice] = -rn.sum(axis=0)
         grad[lay.tilt_slice] = -(rn * self.log_f[:, None]).sum(axis=0)
         return float(value), grad

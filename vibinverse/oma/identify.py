@@ -42,6 +42,8 @@ BASELINE_WIDTH = 0.25  # the surroundings: +-25 % in frequency
 BASELINE_GRID = 2000
 SMOOTH_WIDTH = 0.005  # the singular value's moving average (+-, relative) before its peaks are read
 BASELINE_BINS = 15  # the surroundings span at least +-this many frequencies (short records)
+LOCAL_PROMINENCE = 0.3  # ln units above the higher of its neighbourhood's valleys
+LOCAL_WIDTH = 0.05  # the neighbourhood: +-5 % in frequency
 #: the least damping ratio a peak's fit starts from: from a spike-narrow start the optimizer stays on
 #: a periodogram spike beside the mode; from a broad one it narrows onto the mode
 START_ZETA = 0.01
@@ -151,10 +153,22 @@ def pick_peaks(sv: SingularValues, span: float, count: int | None) -> list[_Peak
     s1 = np.log(np.maximum(smooth, 1e-300))
     df = sv.freqs[1] - sv.freqs[0]
     lo = MIN_CYCLES / span
+    # a peak stands above its surroundings' median (a mode's hump) and above its own neighbourhood
+    # (its flanks' and top's ripples do not)
     idx, _ = signal.find_peaks(s1)
     prom_all = s1 - local_baseline(sv.freqs, s1)
     keep = (sv.freqs[idx] >= max(lo, 2 * df)) & (prom_all[idx] >= (PROMINENCE if count is None else 0.05))
     idx = idx[keep]
+    if count is None:  # within +-LOCAL_WIDTH (relative, >= BASELINE_BINS): a hump's top, not its ripples
+        local = np.array(
+            [
+                signal.peak_prominences(s1, [i], wlen=2 * max(BASELINE_BINS, int(LOCAL_WIDTH * sv.freqs[i] / df)) + 1)[
+                    0
+                ][0]
+                for i in idx
+            ]
+        )
+        idx = idx[local >= LOCAL_PROMINENCE] if idx.size else idx
     prom = prom_all[idx]
     order = np.argsort(prom)[::-1]
     wanted = count if count is not None else MAX_BANDS
