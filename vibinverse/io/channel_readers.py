@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vibinverse.errors import DataError, InputError
-from vibinverse.io.file_basics import TIME_REFERENCE_NOTE, UNITS_NOTE, netcdf_format, real_numbers
+from vibinverse.io.file_basics import TIME_REFERENCE_NOTE, UNITS_NOTE, first_line, netcdf_format, real_numbers
 
 #: the options of `load_channels` a reader may take
 OPTIONS = ("time_column", "fs")
@@ -892,7 +892,7 @@ class TdmsReader(ChannelReader):
             tdms = TdmsFile.read(p)
             groups = [(g.name, [(c.name, c[:], dict(c.properties)) for c in g.channels()]) for g in tdms.groups()]
         except Exception as exc:  # noqa: BLE001 - npTDMS raises many kinds on a malformed file
-            raise DataError(f"channels: cannot read the TDMS file {p}: {_first_line(exc)}") from None
+            raise DataError(f"channels: cannot read the TDMS file {p}: {first_line(exc)}") from None
         groups = [(g, chans) for g, chans in groups if chans]
         if not groups:
             raise DataError(f"channels: {p} holds no channels")
@@ -1010,7 +1010,7 @@ class MatReader(ChannelReader):
         try:
             arrays = _matlab_v73(p) if h5py.is_hdf5(p) else _matlab_v5(p)
         except NotImplementedError as exc:
-            raise DataError(f"channels: cannot read the MATLAB file {p}: {_first_line(exc)}") from None
+            raise DataError(f"channels: cannot read the MATLAB file {p}: {first_line(exc)}") from None
         structs = [k for k, v in arrays.items() if isinstance(v, dict)]
         if len(arrays) == 1 and structs:
             arrays = arrays[structs[0]]
@@ -1060,7 +1060,7 @@ class UffReader(ChannelReader):
             types = [int(t) for t in uff.get_set_types()]
             sets = [uff.read_sets(i) for i, kind in enumerate(types) if kind == 58]
         except Exception as exc:  # noqa: BLE001 - pyuff raises bare Exception on a malformed file
-            raise DataError(f"channels: cannot read the UFF file {p}: {_first_line(exc)}") from None
+            raise DataError(f"channels: cannot read the UFF file {p}: {first_line(exc)}") from None
         if not sets:
             found = ", ".join(sorted({str(t) for t in types})) or "none"
             raise DataError(f"channels: {p} holds no dataset 58 (time records); its datasets: {found}")
@@ -1090,8 +1090,3 @@ class UffReader(ChannelReader):
         units = [_unit(s.get("ordinate_axis_units_lab")) for s in sets]
         factor, _ = _time_factor(p, "abscissa", _unit(sets[0].get("abscissa_axis_units_lab")))
         return Table(t * factor, values, ids, units, [], "the abscissa")
-
-
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from vibinverse.errors import DataError, InputError
 from vibinverse.io.channel_readers import Table, channel_reader_for
-from vibinverse.io.file_basics import UNITS_NOTE, evenly_spaced
+from vibinverse.io.file_basics import UNITS_NOTE, check_rate, evenly_spaced, first_line
 from vibinverse.io.series import Series, check_file
 
 
@@ -175,7 +175,7 @@ def load_channels(
     cells are gaps (NaN). Every problem is a one-line InputError (a file's content: DataError)
     naming the file or option and what is allowed."""
     p = check_file(path, "channels")
-    rate = _check_fs(fs)
+    rate = check_rate(fs)
     reader = channel_reader_for(p)
     given = {"time_column": time_column, "fs": rate}
     refused = [name for name, value in given.items() if value is not None and name not in reader.options]
@@ -186,7 +186,7 @@ def load_channels(
     except InputError:
         raise
     except (OSError, ValueError, TypeError, KeyError, IndexError, EOFError, zipfile.BadZipFile) as exc:
-        raise DataError(f"channels: cannot read {p}: {_first_line(exc)}") from None
+        raise DataError(f"channels: cannot read {p}: {first_line(exc)}") from None
     time, values = _checked(p, table, rate)
     names = list(table.names)
     wanted = _name_list(channels, "channels", every="all")
@@ -225,7 +225,7 @@ def read_geometry(path: str | Path) -> dict[str, tuple[float, float, float]]:
     try:
         text = p.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(f"geometry: cannot read {p}: {_first_line(exc)}") from None
+        raise DataError(f"geometry: cannot read {p}: {first_line(exc)}") from None
     rows = [
         (n, line) for n, line in enumerate(text.splitlines(), 1) if line.strip() and not line.lstrip().startswith("#")
     ]
@@ -262,23 +262,6 @@ def read_geometry(path: str | Path) -> dict[str, tuple[float, float, float]]:
     if not out:
         raise DataError(f"geometry: {p} has a header and no rows")
     return out
-
-
-def _check_fs(fs: Any) -> float | None:
-    if fs is None:
-        return None
-    try:
-        value = float(fs)
-    except (TypeError, ValueError):
-        raise InputError(f"fs: {fs!r} is not a number (the sampling rate in Hz)") from None
-    if isinstance(fs, bool) or not (math.isfinite(value) and value > 0):
-        raise InputError(f"fs: {fs!r} Hz; allowed range (0, inf)")
-    return value
-
-
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
 
 
 def _name_list(value: Any, what: str, every: str | None = None) -> list[str] | None:

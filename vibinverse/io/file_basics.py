@@ -6,12 +6,13 @@ it, so neither imports the other's insides.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from vibinverse.errors import DataError
+from vibinverse.errors import DataError, InputError
 
 # a uniform grid's tolerance, relative to its step: a timing error of 1e-3 of a sample moves a line at
 # Nyquist by 3e-3 rad, far below any phase a fit resolves
@@ -109,3 +110,24 @@ def real_numbers(a: Any, what: str) -> np.ndarray:
         return a / np.timedelta64(1, "s")
     unit = " (seconds)" if what.endswith("time") else ""
     raise DataError(f"data: {what} holds {_KINDS.get(kind, kind)} (dtype {a.dtype}); real numbers{unit} are needed")
+
+
+def first_line(exc: BaseException) -> str:
+    """The first line of an exception's message (its type's name when it has none): what a one-line
+    error quotes of a library's failure."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def check_rate(fs: Any, field: str = "fs", error: type[InputError] = InputError) -> float | None:
+    """A sampling rate option: None, or a finite positive number of Hz; else a one-line `error`
+    naming `field` and the allowed range."""
+    if fs is None:
+        return None
+    try:
+        value = float(fs)
+    except (TypeError, ValueError):
+        raise error(f"{field}: {fs!r} is not a number (the sampling rate in Hz)") from None
+    if isinstance(fs, bool) or not (math.isfinite(value) and value > 0):
+        raise error(f"{field}: {fs!r} Hz; allowed range (0, inf)")
+    return value

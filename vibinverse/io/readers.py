@@ -18,7 +18,14 @@ import numpy as np
 
 from vibinverse.errors import DataError
 from vibinverse.io import jsonio
-from vibinverse.io.file_basics import TIME_REFERENCE_NOTE, UNITS_NOTE, choose_channel, netcdf_format, real_numbers
+from vibinverse.io.file_basics import (
+    TIME_REFERENCE_NOTE,
+    UNITS_NOTE,
+    choose_channel,
+    first_line,
+    netcdf_format,
+    real_numbers,
+)
 
 #: the options of `load_series` a reader may take
 OPTIONS = ("time_column", "value_column", "fs")
@@ -358,11 +365,6 @@ def _since_first(stamps: Any) -> tuple[np.ndarray, str]:
     return (d - d[0]) / np.timedelta64(1, "s"), f"{TIME_REFERENCE_NOTE}{ref}"
 
 
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
-
-
 # ------------------------------------------------------------------------------------------ Parquet
 
 
@@ -515,7 +517,7 @@ class CsvReader(SeriesReader):
             try:
                 t, note = _since_first(pd.DatetimeIndex(pd.to_datetime(times, format="ISO8601", utc=bool(zone))))
             except (ValueError, OverflowError) as exc:
-                why = _first_line(exc).split(" You might")[0]  # pandas' advice names its own options
+                why = first_line(exc).split(" You might")[0]  # pandas' advice names its own options
                 raise DataError(f"data: {p}: time: not ISO 8601 date-times: {why}") from None
             notes.append(note)
         else:

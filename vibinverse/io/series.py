@@ -8,7 +8,6 @@ problem raises `vibinverse.errors.DataError` with one line naming it.
 from __future__ import annotations
 
 import copy
-import math
 import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -21,7 +20,9 @@ from vibinverse.errors import DataError, InputError
 from vibinverse.io.file_basics import (
     TIME_REFERENCE_NOTE,
     UNITS_NOTE,
+    check_rate,
     evenly_spaced,
+    first_line,
     real_numbers,
 )
 from vibinverse.io.readers import OPTIONS, reader_for
@@ -172,7 +173,7 @@ def load_series(
     chooses the channel by name or 0-based index; the time from its X_Value column, else X0 + Delta_X
     or `fs`; the channel's unit noted)."""
     p = check_file(path, "data")
-    fs = _check_fs(fs)
+    fs = check_rate(fs, "data: fs", DataError)
     reader = reader_for(p)
     given = dict(zip(OPTIONS, (time_column, value_column, fs)))
     refused = [name for name, value in given.items() if value is not None and name not in reader.options]
@@ -183,25 +184,8 @@ def load_series(
     except DataError:
         raise
     except (OSError, ValueError, TypeError, KeyError, IndexError, EOFError, zipfile.BadZipFile) as exc:
-        raise DataError(f"data: cannot read {p}: {_first_line(exc)}") from None
+        raise DataError(f"data: cannot read {p}: {first_line(exc)}") from None
     return validate(raw.time, raw.intensity, str(p), raw.scene, raw.notes)
-
-
-def _check_fs(fs: Any) -> float | None:
-    if fs is None:
-        return None
-    try:
-        value = float(fs)
-    except (TypeError, ValueError):
-        raise DataError(f"data: fs: {fs!r} is not a number (the sampling rate in Hz)") from None
-    if isinstance(fs, bool) or not (math.isfinite(value) and value > 0):
-        raise DataError(f"data: fs: {fs!r} Hz; allowed range (0, inf)")
-    return value
-
-
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
 
 
 def validate(
