@@ -88,6 +88,7 @@ from vibinverse.engines.whittle import (
     walk_step_variance,
 )
 from vibinverse.errors import SceneError, Unsupported
+from vibinverse.io.file_basics import steady
 from vibinverse.io.series import MIN_CYCLES, Series, evenly_spaced
 from vibinverse.kalman import filter_two_states, njit, unique_steps
 from vibinverse.models.base import (
@@ -108,11 +109,6 @@ _OSC, _WALK, _IWALK, _OU = 0, 1, 2, 3
 #: likelihood (`vibinverse.engines.whittle`; `ModalModel.spectral`), 10x cheaper per call than the
 #: Kalman filter there and within a few percent of its interval widths (tests/vibinverse/engines/test_whittle.py)
 WHITTLE_MIN_SAMPLES = 20_000
-#: stamps whose every step is within this fraction of their mean step are read on the regular grid
-#: by Whittle's engine (a logger's clock whose rate wanders: a smartphone's 425 Hz stamps keep every
-#: step within 0.1 % but wander 3.6 % of a step (rms) off one grid; a frequency then moves by at most
-#: this fraction, 0.2 mHz at 17.85 Hz at 0.1 %); a dropped frame or a jittered camera is not steady
-STEADY_RTOL = 0.01
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -327,14 +323,6 @@ def whittle_engine(series: Series, gaps: bool, gain: bool, integrated: bool) -> 
     if gaps or gain or integrated or series.time.size < WHITTLE_MIN_SAMPLES or not steady(series.time):
         return None
     return Periodogram(series.time.size, 1)
-
-
-def steady(t: np.ndarray) -> bool:
-    """Whether every step of the stamps `t` is within STEADY_RTOL of their mean step (uniform
-    stamps are)."""
-    steps = np.diff(t)
-    mean = (t[-1] - t[0]) / (t.size - 1)
-    return bool(mean > 0 and np.max(np.abs(steps - mean)) <= STEADY_RTOL * mean)
 
 
 def wrap_phase(phase: float) -> float:

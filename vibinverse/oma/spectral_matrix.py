@@ -23,7 +23,7 @@ from scipy import signal
 
 from vibinverse.errors import DataError
 from vibinverse.io.channels import Channels
-from vibinverse.models.modal import STEADY_RTOL, steady
+from vibinverse.io.file_basics import STEADY_RTOL, steady
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +93,7 @@ def detrended(channels: Channels) -> tuple[np.ndarray, list[str]]:
 
 def step_of(channels: Channels) -> tuple[float, list[str]]:
     """The sample step: uniform stamps' median step, or the mean step of steady stamps (every step
-    within `vibinverse.models.modal.STEADY_RTOL` of the mean: a logger's or phone's clock), which are
+    within `vibinverse.io.file_basics.STEADY_RTOL` of the mean: a logger's or phone's clock), which are
     read on the regular grid (noted); a one-line DataError for irregular stamps."""
     if channels.uniform:
         return channels.dt, []
