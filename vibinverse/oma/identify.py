@@ -528,6 +528,8 @@ def identify(
     ords = ordinates(channels)
     span = ords.n * ords.dt
     nyq = 0.5 / ords.dt
+    if band is not None and nyq < band[1] <= nyq * (1 + 1e-6):  # Nyquist as the stamps round it
+        band = (band[0], nyq)
     if band is not None and not (0 <= band[0] < band[1] <= nyq):
         raise InputError(f"band: need 0 <= lo < hi <= Nyquist {nyq:g} Hz, got {band[0]:g}-{band[1]:g}")
     sv = singular_values(channels)

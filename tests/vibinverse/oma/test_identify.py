@@ -119,3 +119,9 @@ def test_the_report_escapes_channel_names(three_modes):
     page = oma_html(named, "a<b>.csv")
     assert "<script>x" not in page and "&lt;script&gt;x&lt;/script&gt;" in page
     assert "<title>vibinverse modal identification: a&lt;b&gt;.csv</title>" in page
+
+
+def test_a_band_up_to_nyquist_is_allowed_as_the_stamps_round_it():
+    ch = modal_record(MODES[:1], SHAPES[:1, :3], fs=20.0, duration=120.0, seed=5)
+    r = identify(ch, quantity="displacement", band=(0.2, 10.0))  # fs from the stamps: 9.99999999... Hz
+    assert r.search[1] <= 0.5 * r.fs and len(r.modes) == 1
