@@ -53,14 +53,18 @@ def update_realdata(bench_dir: Path) -> None:
     if not source.is_file():
         raise SystemExit(f"update_pages: no {source}; run `vibinverse bench --realdata --quick -o {bench_dir}` first")
     result = relative(json.loads(source.read_text()))
-    page = REALDATA_PAGE.read_text()
-    if page.count(BEGIN) != 1 or page.count(END) != 1:
-        raise SystemExit(f"update_pages: {REALDATA_PAGE} needs the markers {BEGIN!r} and {END!r} once each")
-    head, rest = page.split(BEGIN)
-    tail = rest.split(END, 1)[1]
+    splice(REALDATA_PAGE, BEGIN, END, table_block(result))
     REALDATA_JSON.write_text(json.dumps(result, indent=1) + "\n")
     plot(result, REALDATA_FIGURE)
-    REALDATA_PAGE.write_text(head + table_block(result) + tail)
+
+
+def splice(page_path: Path, begin: str, end: str, block: str) -> None:
+    """Replace the block between the markers `begin` and `end` (each once on the page) by `block`."""
+    page = page_path.read_text()
+    if page.count(begin) != 1 or page.count(end) != 1:
+        raise SystemExit(f"update_pages: {page_path} needs the markers {begin!r} and {end!r} once each")
+    head, rest = page.split(begin)
+    page_path.write_text(head + block + rest.split(end, 1)[1])
 
 
 def oma_block(result: dict[str, Any]) -> str:
@@ -75,14 +79,9 @@ def update_oma(bench_dir: Path) -> None:
     from vibinverse.bench.oma_bench import plot as oma_plot
 
     result = json.loads((bench_dir / "oma.json").read_text())
-    page = OMA_PAGE.read_text()
-    if page.count(OMA_BEGIN) != 1 or page.count(OMA_END) != 1:
-        raise SystemExit(f"update_pages: {OMA_PAGE} needs the markers {OMA_BEGIN!r} and {OMA_END!r} once each")
-    head, rest = page.split(OMA_BEGIN)
-    tail = rest.split(OMA_END, 1)[1]
+    splice(OMA_PAGE, OMA_BEGIN, OMA_END, oma_block(result))
     OMA_JSON.write_text(json.dumps(result, indent=1) + "\n")
     oma_plot(result, OMA_FIGURE)
-    OMA_PAGE.write_text(head + oma_block(result) + tail)
 
 
 if __name__ == "__main__":
