@@ -232,6 +232,9 @@ class BandLikelihood:
         self.power = power
         #: (J, C, C) held fixed: the in-band tails of the modes fitted in other bands
         self.background = background
+        self._background = (
+            np.ascontiguousarray(background, dtype=float) if background is not None else np.empty((0, 0, 0))
+        )
         self.const = -self.freqs.size * layout.channels * math.log(math.pi)
         #: ln(f / the band's geometric centre): the noise's log-log slope is about the centre
         self.log_f = np.log(self.freqs / math.sqrt(self.freqs[0] * self.freqs[-1])) if self.freqs.size else self.freqs
@@ -315,8 +318,9 @@ class BandLikelihood:
         noise = self.noise(x)
         m, nj = lay.modes, self.freqs.size
         q, rvg, rdiag = np.empty((m, nj)), np.empty((m, lay.channels)), np.empty((nj, lay.channels))
-        bg = self.background if self.background is not None else np.empty((0, 0, 0))
-        logdet, quad = band_terms(g, np.ascontiguousarray(v), noise, bg, self._yr, self._yi, q, rvg, rdiag)
+        bg = self._background
+        c_ = np.ascontiguousarray  # one compiled specialization: every array C-contiguous float64
+        logdet, quad = band_terms(c_(g), c_(v), c_(noise), bg, self._yr, self._yi, q, rvg, rdiag)
         value = self.const - logdet - quad
         if not math.isfinite(value):
             return -math.inf, None
