@@ -55,7 +55,7 @@ MAX_BAND_ZETA = 0.05  # a band is never wider than +-BAND_WIDTHS x this, relativ
 #: nor narrower than +-BAND_WIDTHS x this: a fit that went to a spike beside the mode must still see it
 MIN_BAND_ZETA = 0.002
 MIN_ORDINATES = 16
-MAX_MODES_PER_BAND = 3
+MAX_MODES_PER_BAND = 6  # a band may hold several close modes (an 8-storey building's top four merge into one)
 DRAWS = 4000
 MAX_TILT = 8.0  # bound of a channel noise's log-log slope across a band
 #: below this curvature (sd 5 in ln) a channel's noise level is unidentified in the band (`_modes_of`)
