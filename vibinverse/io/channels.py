@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from vibinverse.errors import DataError, InputError
 from vibinverse.io.channel_readers import Table, channel_reader_for
-from vibinverse.io.file_basics import UNITS_NOTE, check_rate, evenly_spaced, first_line
+from vibinverse.io.file_basics import UNITS_NOTE, evenly_spaced, first_line, positive_option
 from vibinverse.io.series import Series, check_file
 
 
@@ -175,7 +175,7 @@ def load_channels(
     cells are gaps (NaN). Every problem is a one-line InputError (a file's content: DataError)
     naming the file or option and what is allowed."""
     p = check_file(path, "channels")
-    rate = check_rate(fs)
+    rate = positive_option(fs, "fs", "Hz")
     reader = channel_reader_for(p)
     given = {"time_column": time_column, "fs": rate}
     refused = [name for name, value in given.items() if value is not None and name not in reader.options]

@@ -25,7 +25,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from vibinverse.errors import DataError, InputError
-from vibinverse.io.file_basics import UNIFORM_RTOL, netcdf_format
+from vibinverse.io.file_basics import UNIFORM_RTOL, netcdf_format, positive_option
 from vibinverse.io.video import (
     ChannelFrames,
     FrameSource,
@@ -129,7 +129,7 @@ def open_cube(
       chunks then start at keyframes where its groups of pictures fit, so they may differ in size);
     - `variable`: the 3-D variable of a netCDF/zarr file (default: its only one).
     """
-    fps = _positive(fps, "fps", "Hz")
+    fps = positive_option(fps, "fps", "Hz")
     if chunks is not None and (isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or chunks < 1):
         raise InputError(f"chunks: {chunks!r}; allowed: an integer number of frames >= 1")
     if channel not in CHANNELS:
@@ -141,18 +141,6 @@ def open_cube(
     _check_input(p, fmt)
     raw = fmt.read(p, variable, channel)
     return _assemble(raw, p, fps, channel, chunks)
-
-
-def _positive(value: Any, name: str, unit: str) -> float | None:
-    if value is None:
-        return None
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name}: {value!r} is not a number ({unit})") from None
-    if isinstance(value, bool) or not (math.isfinite(v) and v > 0):
-        raise InputError(f"{name}: {value!r} {unit}; allowed range (0, inf)")
-    return v
 
 
 def _check_input(p: Path, fmt: CubeFormat) -> None:

@@ -119,18 +119,18 @@ def first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
-def check_rate(fs: Any, field: str = "fs", error: type[InputError] = InputError) -> float | None:
-    """A sampling rate option: None, or a finite positive number of Hz; else a one-line `error`
-    naming `field` and the allowed range."""
-    if fs is None:
+def positive_option(value: Any, name: str, unit: str, error: type[InputError] = InputError) -> float | None:
+    """An option that is None or a finite positive number (a sampling rate, a frame rate); else a
+    one-line `error` naming the option, its unit and the allowed range."""
+    if value is None:
         return None
     try:
-        value = float(fs)
+        v = float(value)
     except (TypeError, ValueError):
-        raise error(f"{field}: {fs!r} is not a number (the sampling rate in Hz)") from None
-    if isinstance(fs, bool) or not (math.isfinite(value) and value > 0):
-        raise error(f"{field}: {fs!r} Hz; allowed range (0, inf)")
-    return value
+        raise error(f"{name}: {value!r} is not a number ({unit})") from None
+    if isinstance(value, bool) or not (math.isfinite(v) and v > 0):
+        raise error(f"{name}: {value!r} {unit}; allowed range (0, inf)")
+    return v
 
 
 #: stamps whose every step is within this fraction of their mean step are read on the regular grid

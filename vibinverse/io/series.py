@@ -20,9 +20,9 @@ from vibinverse.errors import DataError, InputError
 from vibinverse.io.file_basics import (
     TIME_REFERENCE_NOTE,
     UNITS_NOTE,
-    check_rate,
     evenly_spaced,
     first_line,
+    positive_option,
     real_numbers,
 )
 from vibinverse.io.readers import OPTIONS, reader_for
@@ -173,7 +173,7 @@ def load_series(
     chooses the channel by name or 0-based index; the time from its X_Value column, else X0 + Delta_X
     or `fs`; the channel's unit noted)."""
     p = check_file(path, "data")
-    fs = check_rate(fs, "data: fs", DataError)
+    fs = positive_option(fs, "data: fs", "Hz", DataError)
     reader = reader_for(p)
     given = dict(zip(OPTIONS, (time_column, value_column, fs)))
     refused = [name for name, value in given.items() if value is not None and name not in reader.options]
