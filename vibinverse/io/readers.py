@@ -339,8 +339,10 @@ def _columns(
             "the time is ambiguous; drop fs (--fs) or the time column"
         )
     ix = find(value_column or "intensity")
-    if ix is None and value_column is None and fs is not None and len(names) == 1:
-        ix = 0  # values only: the one column there is
+    if ix is None and value_column is None:
+        others = [i for i in range(len(names)) if i != it]
+        if len(others) == 1 and (it is not None or fs is not None):
+            ix = others[0]  # one column besides the time (or values only with fs): the one there is
     missing = []
     if ix is None:
         what = repr(value_column) if value_column is not None else "intensity"

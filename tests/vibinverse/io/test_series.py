@@ -322,7 +322,10 @@ def test_parquet_fits_like_the_csv(plate):
     s = load_series(q, time_column="when", value_column="v")
     assert s.notes == ["time: seconds since 2024-06-21T09:30:00"]
     np.testing.assert_allclose(s.time, obs.time, rtol=0, atol=1e-6)
-    with pytest.raises(DataError, match=r"no value column intensity .*value_column.*; its columns: when,v"):
+    # one column besides the time: the value column, whatever its name
+    np.testing.assert_array_equal(load_series(q, time_column="when").intensity, s.intensity)
+    with pytest.raises(DataError, match=r"no value column intensity .*value_column.*; its columns: when,v,w"):
+        pd.DataFrame({"when": _stamps(obs.time), "v": obs.intensity, "w": 1.0}).to_parquet(q)
         load_series(q, time_column="when")
     r = folder / "indexed.parquet"  # a named index (pandas' usual time axis) is a column
     pd.DataFrame({"intensity": obs.intensity}, index=pd.Index(obs.time, name="time")).to_parquet(r)
