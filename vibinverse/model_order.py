@@ -114,7 +114,6 @@ import numpy as np
 from vibinverse.errors import NumericalError
 from vibinverse.io.series import FEW_CYCLES, MIN_CYCLES, Series
 from vibinverse.models.modal import (
-    FLICKER_LOWEST_CORNER,
     GAIN_TERMS,
     ModalModel,
     ModalSpec,
@@ -127,6 +126,9 @@ from vibinverse.models.modal import (
 )
 from vibinverse.optimize import maximize
 from vibinverse.priors import ParameterSpace
+from vibinverse.terms.drift import RandomWalk
+from vibinverse.terms.noise import AR1, ColouredNoise
+from vibinverse.terms.nuisance import DRIFT_TERMS, NO_DRIFT, NO_NOISE, NOISE_TERMS
 
 logger = logging.getLogger(__name__)
 
@@ -362,27 +364,13 @@ def candidates(
             )
         )
     sd = float(np.nanstd(v))
-    if search["drift"] and spec.drift == "none":
+    if search["drift"] and not spec.drifting:
         grid = [{**values, "drift.rate": c * sd / math.sqrt(span)} for c in (0.03, 0.1, 0.3, 1.0, 3.0)]
-        out.append(Candidate("drift (random walk)", replace(spec, drift="walk"), grid, ["drift.rate"]))
-    if search["noise"] and spec.noise == "white":
-        grid = [
-            {**values, "ar.rms": c * sigma, "ar.time": tau * dt, "noise.sigma": sigma * math.sqrt(max(1 - c * c, 0.05))}
-            for tau in (2.0, 10.0, 50.0)
-            for c in (0.3, 0.9)
-        ]
-        out.append(Candidate("AR(1) noise", replace(spec, noise="ar1"), grid, ["ar.rms", "ar.time"]))
-        grid = [
-            {
-                **values,
-                "flicker.rms": c * sigma,
-                "flicker.corner": max(corner * nyq, FLICKER_LOWEST_CORNER / span),
-                "noise.sigma": sigma * math.sqrt(max(1 - c * c, 0.05)),
-            }
-            for corner in (1.0, 0.2, 0.04)
-            for c in (0.1, 0.3, 0.9)
-        ]
-        out.append(Candidate("1/f noise", replace(spec, noise="1/f"), grid, ["flicker.rms", "flicker.corner"]))
+        out.append(Candidate("drift (random walk)", replace(spec, drift=RandomWalk.kind), grid, ["drift.rate"]))
+    if search["noise"] and not spec.coloured:
+        for kind, noise in coloured_noises():  # each screened on its own grid (`ColouredNoise.screen_starts`)
+            grid = [{**values, **g} for g in noise.screen_starts(sigma, dt, span)]
+            out.append(Candidate(noise.label, replace(spec, noise=kind), grid, noise.names()))
     if search.get("white") and not spec.white:
         grid = [{**values, "noise.sigma": c * sigma} for c in (0.03, 0.1, 0.3)]
         out.append(Candidate("white noise", replace(spec, white=True), grid, ["noise.sigma"]))
@@ -391,9 +379,14 @@ def candidates(
     return out
 
 
+def coloured_noises() -> list[tuple[str, ColouredNoise]]:
+    """(table spelling, term) of each coloured noise, in the registry's order (`NOISE_TERMS`)."""
+    return [(kind, cls()) for kind, cls in NOISE_TERMS.items() if cls is not None]
+
+
 def noise_rms(values: dict[str, float]) -> float:
     """The white noise's sigma, or without white noise the coloured noise's rms: the noise's scale."""
-    for name in ("noise.sigma", "ar.rms", "flicker.rms"):
+    for name in ("noise.sigma", *(noise.rms_name for _, noise in coloured_noises())):
         if name in values:
             return values[name]
     raise KeyError("noise.sigma")
@@ -427,7 +420,7 @@ def gain_candidate(model: ModalModel, values: dict[str, float], spec: ModalSpec)
     with the drift's rate a tenth."""
     coef = model.gain_start(GAIN_TERMS)
     grid = [{**values, **_gain_values(coef * k)} for k in (0.5, 1.0, 1.5)]
-    if spec.drift != "none":
+    if spec.drifting:
         grid += [{**g, "drift.rate": 0.1 * values["drift.rate"]} for g in grid]
     return Candidate("gain drift (multiplicative)", replace(spec, gain=GAIN_TERMS), grid, gain_names(GAIN_TERMS))
 
@@ -468,14 +461,9 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
     with_white = {"noise.sigma": sigma, **values}  # a start that brings the white noise back
     span = max(fit.model.span, series.dt)
     out: list[Candidate] = []
-    nuisance = [
-        "drift.rate",
-        "ar.rms",
-        "ar.time",
-        "flicker.rms",
-        "flicker.corner",
-        *gain_names(max(GAIN_TERMS, spec.gain)),
-    ]
+    # every drift's and coloured noise's parameters (the registries' order), the gain drift's
+    kinds = (cls() for cls in (*DRIFT_TERMS.values(), *NOISE_TERMS.values()) if cls is not None)
+    nuisance = [*dict.fromkeys(n for term in kinds for n in term.names()), *gain_names(max(GAIN_TERMS, spec.gain))]
 
     def move(what: str, new_spec: ModalSpec, starts: list[dict[str, float]]) -> Candidate:
         names = set(new_spec.names())
@@ -488,13 +476,13 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
             start = renumber(values, "modes", i, spec.modes)
             out.append(move(f"remove the mode at {f:.4g} Hz", replace(spec, modes=spec.modes - 1), [start]))
             slow = f * span < FEW_CYCLES or values[f"modes[{i}].damping_ratio"] > SLOW_DAMPING
-            if slow and search["drift"] and spec.drift == "none":
+            if slow and search["drift"] and not spec.drifting:
                 # a mode of under 3 cycles in the record, or nearly critically damped, may be a drift
                 rate = values[f"modes[{i}].rms"] / math.sqrt(span)
                 out.append(
                     move(
                         f"the mode at {f:.4g} Hz exchanged for a random-walk drift",
-                        replace(spec, modes=spec.modes - 1, drift="walk"),
+                        replace(spec, modes=spec.modes - 1, drift=RandomWalk.kind),
                         [{**start, "drift.rate": rate * k} for k in (0.3, 1.0)],
                     )
                 )
@@ -517,11 +505,13 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
             # a line of under 3 cycles in the record may be a slow change of the level
             fewer = replace(spec, lines=spec.lines - 1)
             amp = values[f"lines[{j}].amplitude"]
-            if search["drift"] and spec.drift == "none":
+            if search["drift"] and not spec.drifting:
                 rates = [{**start, "drift.rate": amp / math.sqrt(span) * k} for k in (0.3, 1.0)]
                 out.append(
                     move(
-                        f"the line at {f:.4g} Hz exchanged for a random-walk drift", replace(fewer, drift="walk"), rates
+                        f"the line at {f:.4g} Hz exchanged for a random-walk drift",
+                        replace(fewer, drift=RandomWalk.kind),
+                        rates,
                     )
                 )
             if search["gain"] and not spec.gain:
@@ -532,50 +522,51 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
                         [{**start, **_gain_values(fit.model.gain_start(GAIN_TERMS))}],
                     )
                 )
-    if search["drift"] and spec.drift != "none":
-        out.append(move("remove the drift", replace(spec, drift="none"), [dict(values)]))
-    if search["noise"] and spec.noise != "white":
-        out.append(move(f"remove the {spec.noise} noise", replace(spec, noise="white", white=True), [with_white]))
-        other = "1/f" if spec.noise == "ar1" else "ar1"
-        starts = (
-            [
-                {**values, "flicker.rms": values.get("ar.rms", sigma), "flicker.corner": corner}
-                for corner in (0.5 / series.dt, 1.0 / (2.0 * math.pi * values.get("ar.time", series.dt)))
-            ]
-            if other == "1/f"
-            else [
-                {**values, "ar.rms": values.get("flicker.rms", sigma), "ar.time": tau * series.dt}
-                for tau in (3.0, 30.0)
-            ]
-        )
-        out.append(move(f"{spec.noise} noise exchanged for {other} noise", replace(spec, noise=other), starts))
+    if search["drift"] and spec.drifting:
+        out.append(move("remove the drift", replace(spec, drift=NO_DRIFT), [dict(values)]))
+    if search["noise"] and spec.coloured:
+        out.append(move(f"remove the {spec.noise} noise", replace(spec, noise=NO_NOISE, white=True), [with_white]))
+        current = NOISE_TERMS[spec.noise]()
+        for other, noise in coloured_noises():  # each other coloured noise in its place
+            if other != spec.noise:
+                starts = noise.replacing(current, values, series.dt)
+                out.append(move(f"{spec.noise} noise exchanged for {other} noise", replace(spec, noise=other), starts))
         if search.get("white") and spec.white:
             # AR(1) alone (the sensor's noise coloured) leaves sigma flat down to its prior's bound
             out.append(move("remove the white noise", replace(spec, white=False), [dict(values)]))
     if search["gain"] and spec.gain:
         out.append(move("remove the gain drift", replace(spec, gain=0), [dict(values)]))
-        if search["drift"] and spec.drift == "none":
+        if search["drift"] and not spec.drifting:
             start = {**values, "drift.rate": 0.1 * sigma / math.sqrt(span)}
             out.append(
-                move("the gain drift exchanged for a random-walk drift", replace(spec, gain=0, drift="walk"), [start])
+                move(
+                    "the gain drift exchanged for a random-walk drift",
+                    replace(spec, gain=0, drift=RandomWalk.kind),
+                    [start],
+                )
             )
-    if search["gain"] and search["drift"] and not spec.gain and spec.drift != "none":
+    if search["gain"] and search["drift"] and not spec.gain and spec.drifting:
         start = {**values, **_gain_values(fit.model.gain_start(GAIN_TERMS))}
-        out.append(move("the drift exchanged for a gain drift", replace(spec, gain=GAIN_TERMS, drift="none"), [start]))
+        out.append(
+            move("the drift exchanged for a gain drift", replace(spec, gain=GAIN_TERMS, drift=NO_DRIFT), [start])
+        )
     if search["noise"] and search["drift"]:
-        rms = values.get("ar.rms", values.get("flicker.rms", sigma))
-        if spec.noise != "white" and spec.drift == "none":
+        if spec.coloured and not spec.drifting:
+            rms = values[NOISE_TERMS[spec.noise].rms_name]
             start = {**with_white, "drift.rate": rms / math.sqrt(span)}
             out.append(
                 move(
                     f"{spec.noise} noise exchanged for a random-walk drift",
-                    replace(spec, noise="white", drift="walk", white=True),
+                    replace(spec, noise=NO_NOISE, drift=RandomWalk.kind, white=True),
                     [start],
                 )
             )
-        if spec.noise == "white" and spec.drift == "walk":
+        if not spec.coloured and DRIFT_TERMS[spec.drift] is RandomWalk:
+            # a slow AR(1) and a random walk describe much the same spectrum
             starts = [{**values, "ar.rms": values["drift.rate"] * math.sqrt(span), "ar.time": span / 10.0}]
-            out.append(move("the drift exchanged for AR(1) noise", replace(spec, noise="ar1", drift="none"), starts))
+            out.append(
+                move("the drift exchanged for AR(1) noise", replace(spec, noise=AR1.kind, drift=NO_DRIFT), starts)
+            )
     return out
 
 
@@ -665,9 +656,9 @@ def slow_exchanges(fit: OrderFit, series: Series, j: int, search: dict[str, bool
             st = {n: v for n, v in start.items() if not n.startswith("gain.")}
             st = {**st, "level": values["level"] * d[0], **_gain_values(d[1:] / d[0])}
             out.append(Candidate(f"a gain drift of {terms} cosines", replace(fewer, gain=terms), [st], []))
-    if search["drift"] and spec.drift == "none":
+    if search["drift"] and not spec.drifting:
         rates = [{**start, "drift.rate": a / math.sqrt(span) * k} for k in (0.3, 1.0)]
-        out.append(Candidate("a random-walk drift", replace(fewer, drift="walk"), rates, []))
+        out.append(Candidate("a random-walk drift", replace(fewer, drift=RandomWalk.kind), rates, []))
     return out
 
 
@@ -1134,7 +1125,7 @@ def _best_move(
 
 def _describe(spec: ModalSpec) -> str:
     parts = [f"{spec.modes} modes", f"{spec.lines} lines"]
-    if spec.drift != "none":
+    if spec.drifting:
         parts.append(f"{spec.drift} drift")
     parts.append(f"{spec.noise} noise" + ("" if spec.white else " without white noise"))
     if spec.gain:

@@ -1,5 +1,6 @@
 """The fitting pipeline: spectral -> SINDy -> MAP (casadi, else scipy) -> emcee, each stage seeding
-the next; `--method` stops it at a stage. A record longer than LONG_RECORD samples finds its MAP over
+the next. Each `--method` is a class (`FitMethod`, found by its name in FIT_METHODS) that says which
+stages it runs and where the chain stops. A record longer than LONG_RECORD samples finds its MAP over
 growing stretches (`stretched_map`). A record of more than IMPORTANCE_RECORD samples, and any
 record of a model that asks for it (`SignalModel.importance_first`: the scene-less modal model),
 has its posterior by default by importance sampling of the Laplace approximation
@@ -18,8 +19,10 @@ import itertools
 import logging
 import math
 import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 from forward.scene import format_bytes, memory_limit
 from vibinverse.detection import DETECTION_GAIN
@@ -33,7 +36,6 @@ from vibinverse.result import FitResult
 
 logger = logging.getLogger(__name__)
 
-METHODS = ("spectral", "sindy", "casadi", "map", "importance", "mcmc", "auto")
 # another reading of the spectrum closer than this in log posterior is reported as ambiguous (the
 # 5-sigma gain of the detection test: one reading is claimed only when the other is that far below)
 AMBIGUITY_MARGIN = DETECTION_GAIN
@@ -99,38 +101,229 @@ def run(
     max_steps: int = 20000,
     progress: bool = True,
 ) -> FitResult:
-    """Fit `posterior` by `method` (one of METHODS); the result's timing holds every stage's seconds."""
-    check_method(method)
+    """Fit `posterior` by `method` (one of METHODS, `fit_method`); the result's timing holds every
+    stage's seconds."""
+    how = fit_method(method)()
     check_fit(posterior)
-    if method == "sindy" and not SindyEstimator.covers(posterior):
-        SindyEstimator().estimate(posterior, None)  # raises Unsupported with the reason
-    timing: dict[str, float] = {}
+    how.check(posterior)
+    return how.fit(posterior, RunOptions(seed, backend, resume, workers, max_steps, progress))
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """What `run` hands the sampling stages (its keyword arguments)."""
+
+    seed: int = 0
+    backend: Path | None = None
+    resume: bool = False
+    workers: int = 1
+    max_steps: int = 20000
+    progress: bool = True
+
+
+#: the fitting methods by name (`--method NAME`), in the order `register_method` saw them
+FIT_METHODS: dict[str, type[FitMethod]] = {}
+
+
+def register_method(cls: type[FitMethod]) -> type[FitMethod]:
+    """Class decorator: make a fitting method available by its name (`--method NAME`)."""
+    FIT_METHODS[cls.name] = cls
+    return cls
+
+
+def fit_method(method: str) -> type[FitMethod]:
+    """The class of `--method NAME`; InputError (one line, the allowed methods) for another name."""
+    check_method(method)
+    return FIT_METHODS[method]
+
+
+def spectral_stage(posterior: Posterior) -> FitResult:
+    """The spectral stage, every method's first; DataError when the model's observation describes
+    none of its readings (`check_observation`)."""
     spectral = SpectralEstimator().fit(posterior)
     check_observation(posterior, spectral)
-    timing.update(spectral.timing)
-    if method == "spectral":
-        return spectral
-    start, sindy = spectral, None
-    if method == "sindy" or (method == "auto" and SindyEstimator.covers(posterior)):
+    return spectral
+
+
+class FitMethod(ABC):
+    """A value of `--method`: the stages of the chain it runs and where it stops (`fit`), and what
+    the bench, the verdict and the report need to know of it."""
+
+    name: ClassVar[str]
+    #: how the bench's log names it
+    label: ClassVar[str]
+    #: its MAP is the derivative-free scipy one, never casadi's
+    derivative_free: ClassVar[bool] = False
+    #: SINDy runs between the spectral stage and the MAP, when it covers the model
+    sindy_seeds: ClassVar[bool] = False
+    #: its posterior is always emcee's (the result reports the sampler's convergence)
+    samples_by_emcee: ClassVar[bool] = False
+    #: its last stage may decline and hand back the stage before it (SINDy: the spectral start)
+    may_decline: ClassVar[bool] = False
+    #: what the intervals of its summary are when the summary does not say (one written before the
+    #: summary's `approximation`, `vibinverse.verdict.approximation`): None for posterior draws
+    approximation: ClassVar[str | None] = "laplace"
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "label" not in cls.__dict__ and "name" in cls.__dict__:
+            cls.label = cls.name
+
+    def check(self, posterior: Posterior) -> None:
+        """Unsupported, with the reason, before any stage runs when the method cannot fit `posterior`
+        (none by default)."""
+        return None
+
+    @abstractmethod
+    def fit(self, posterior: Posterior, options: RunOptions) -> FitResult:
+        """The method's stages on `posterior`; the result's timing holds every stage's seconds."""
+
+    def to_map(self, posterior: Posterior, seed: int) -> tuple[FitResult, dict | None, dict[str, float]]:
+        """(the MAP, SINDy's diagnostics or None, every stage's seconds): the spectral stage, SINDy
+        when `sindy_seeds` and it covers the model, and the MAP from the last of them (`map_stage`)."""
+        spectral = spectral_stage(posterior)
+        timing = dict(spectral.timing)
+        start, sindy = spectral, None
+        if self.sindy_seeds and SindyEstimator.covers(posterior):
+            stage = SindyEstimator().fit(posterior, spectral)
+            timing.update(stage.timing)
+            sindy, start = stage.diagnostics["sindy"], stage
+        best = map_stage(posterior, start, self, seed)
+        timing.update(best.timing)
+        return best, sindy, timing
+
+    def emcee(
+        self, posterior: Posterior, best: FitResult, sindy: dict | None, timing: dict, options: RunOptions
+    ) -> FitResult:
+        """emcee's posterior from the MAP `best` (`finish`ed)."""
+        result = Emcee().fit(
+            posterior,
+            best,
+            backend=options.backend,
+            resume=options.resume,
+            workers=options.workers,
+            seed=options.seed,
+            max_steps=options.max_steps,
+            progress=options.progress,
+        )
+        return self.finish(result, best, sindy, timing)
+
+    def finish(self, result: FitResult, best: FitResult, sindy: dict | None, timing: dict) -> FitResult:
+        """The sampling stage's result with every stage's seconds, this method's name, the model
+        facts of the MAP stage and SINDy's diagnostics."""
+        timing.update(result.timing)
+        result.timing = timing
+        result.method = self.name
+        result.data = {**result.data, **({"model": best.data["model"]} if "model" in best.data else {})}
+        if sindy is not None:
+            result.diagnostics["sindy"] = sindy
+        return result
+
+
+@register_method
+class SpectralMethod(FitMethod):
+    """The spectral stage alone."""
+
+    name = "spectral"
+    approximation = "spectral"
+
+    def fit(self, posterior: Posterior, options: RunOptions) -> FitResult:
+        return spectral_stage(posterior)
+
+
+@register_method
+class SindyMethod(FitMethod):
+    """Spectral, then SINDy (a model with a resonance it identifies; else Unsupported before any
+    stage). A declined SINDy hands back the spectral start."""
+
+    name = "sindy"
+    may_decline = True
+    approximation = "jackknife"
+
+    def check(self, posterior: Posterior) -> None:
+        if not SindyEstimator.covers(posterior):
+            SindyEstimator().estimate(posterior, None)  # raises Unsupported with the reason
+
+    def fit(self, posterior: Posterior, options: RunOptions) -> FitResult:
+        spectral = spectral_stage(posterior)
         stage = SindyEstimator().fit(posterior, spectral)
-        timing.update(stage.timing)
-        if method == "sindy":
-            stage.timing = timing
-            return stage
-        sindy = stage.diagnostics["sindy"]
-        start = stage
-    best = map_stage(posterior, start, method, seed)
-    timing.update(best.timing)
-    if method in ("map", "casadi"):
+        stage.timing = {**spectral.timing, **stage.timing}
+        return stage
+
+
+@register_method
+class CasadiMethod(FitMethod):
+    """Spectral, then the MAP by casadi + IPOPT (the derivative-free MAP where casadi does not
+    cover the model or fails) with its Laplace approximation."""
+
+    name = "casadi"
+
+    def fit(self, posterior: Posterior, options: RunOptions) -> FitResult:
+        best, _, timing = self.to_map(posterior, options.seed)
         best.timing = timing
         return best
-    long_record = posterior.series.time.size > IMPORTANCE_RECORD
-    first = method == "auto" and (long_record or posterior.model.importance_first)  # not asked for: tried first
-    if method == "importance" or first:
+
+
+@register_method
+class MapMethod(CasadiMethod):
+    """Spectral, then the derivative-free MAP (scipy) with its Laplace approximation."""
+
+    name = "map"
+    derivative_free = True
+
+
+@register_method
+class ImportanceMethod(FitMethod):
+    """Spectral, MAP, then its Laplace approximation importance-sampled (`LaplaceImportance`), on a
+    record of any length; emcee when that fails its check."""
+
+    name = "importance"
+
+    def fit(self, posterior: Posterior, options: RunOptions) -> FitResult:
+        best, sindy, timing = self.to_map(posterior, options.seed)
         try:
-            result = LaplaceImportance().fit(posterior, best, seed=seed, workers=workers)
+            result = LaplaceImportance().fit(posterior, best, seed=options.seed, workers=options.workers)
         except Unsupported as exc:
-            if first and long_record:
+            logger.warning("%s; sampling with emcee", exc)
+            return self.emcee(posterior, best, sindy, timing, options)
+        return self.finish(result, best, sindy, timing)
+
+
+@register_method
+class McmcMethod(FitMethod):
+    """Spectral, MAP, then emcee."""
+
+    name = "mcmc"
+    label = "emcee"
+    samples_by_emcee = True
+    approximation = None
+
+    def fit(self, posterior: Posterior, options: RunOptions) -> FitResult:
+        best, sindy, timing = self.to_map(posterior, options.seed)
+        return self.emcee(posterior, best, sindy, timing, options)
+
+
+@register_method
+class AutoMethod(FitMethod):
+    """The default: spectral, SINDy where it covers the model, MAP, then the posterior: importance
+    sampling first for a record longer than IMPORTANCE_RECORD samples or a model that asks for it
+    (`SignalModel.importance_first`), else emcee. When importance sampling fails its check, a long
+    record keeps the Laplace approximation (with the failed check in `importance_check`), any
+    other is sampled by emcee."""
+
+    name = "auto"
+    sindy_seeds = True
+    approximation = None
+
+    def fit(self, posterior: Posterior, options: RunOptions) -> FitResult:
+        best, sindy, timing = self.to_map(posterior, options.seed)
+        long_record = posterior.series.time.size > IMPORTANCE_RECORD
+        if not (long_record or posterior.model.importance_first):
+            return self.emcee(posterior, best, sindy, timing, options)
+        try:
+            result = LaplaceImportance().fit(posterior, best, seed=options.seed, workers=options.workers)
+        except Unsupported as exc:
+            if long_record:
                 # emcee's walkers on a long record: tens of minutes to hours (a 63,000-sample beam
                 # record with 6 modes and 5 lines: 35 parameters, ~1 ms a call); the Laplace
                 # approximation answers, and says that its check failed
@@ -138,33 +331,13 @@ def run(
                     "%s; the intervals are the Laplace approximation's (--method mcmc samples the posterior)", exc
                 )
                 best.diagnostics["importance_check"] = str(exc).removeprefix("the Laplace approximation fails its ")
-                return _finish(best, best, sindy, timing, method)
-            (logger.info if first else logger.warning)("%s; sampling with emcee", exc)
-        else:
-            return _finish(result, best, sindy, timing, method)
-    result = Emcee().fit(
-        posterior,
-        best,
-        backend=backend,
-        resume=resume,
-        workers=workers,
-        seed=seed,
-        max_steps=max_steps,
-        progress=progress,
-    )
-    return _finish(result, best, sindy, timing, method)
+                return self.finish(best, best, sindy, timing)
+            logger.info("%s; sampling with emcee", exc)
+            return self.emcee(posterior, best, sindy, timing, options)
+        return self.finish(result, best, sindy, timing)
 
 
-def _finish(result: FitResult, best: FitResult, sindy: dict | None, timing: dict, method: str) -> FitResult:
-    """The sampling stage's result with every stage's seconds, the model facts of the MAP stage and
-    SINDy's diagnostics."""
-    timing.update(result.timing)
-    result.timing = timing
-    result.method = method
-    result.data = {**result.data, **({"model": best.data["model"]} if "model" in best.data else {})}
-    if sindy is not None:
-        result.diagnostics["sindy"] = sindy
-    return result
+METHODS = tuple(FIT_METHODS)
 
 
 #: records longer than this many samples have their MAP found on a leading stretch of
@@ -180,11 +353,14 @@ STRETCH_GROWTH = 4
 IMPORTANCE_RECORD = 20_000
 
 
-def map_stage(posterior: Posterior, start: FitResult, method: str, seed: int) -> FitResult:
-    """MAP from every candidate start: casadi + IPOPT with exact derivatives, except for method
-    "map" (derivative-free scipy), which is also the fallback when casadi does not cover the model
-    or fails. When the model changes its evaluation at the optimum (`SignalModel.refine`), the MAP
-    runs again from there. A record longer than LONG_RECORD samples goes through `stretched_map`."""
+def map_stage(posterior: Posterior, start: FitResult, method: str | FitMethod, seed: int) -> FitResult:
+    """MAP from every candidate start: casadi + IPOPT with exact derivatives, except for a
+    `derivative_free` method (`method`: its name or an instance) such as "map" (derivative-free
+    scipy), which is also the fallback when casadi does not cover the model or fails. When the
+    model changes its evaluation at the optimum (`SignalModel.refine`), the MAP runs again from
+    there. A record longer than LONG_RECORD samples goes through `stretched_map`."""
+    if isinstance(method, str):
+        method = fit_method(method)()
     if posterior.series.time.size > LONG_RECORD:
         try:
             return stretched_map(posterior, start, method, seed)
@@ -214,7 +390,7 @@ def stretch_lengths(n: int) -> list[int]:
     return [*lengths, n]
 
 
-def stretched_map(posterior: Posterior, start: FitResult, method: str, seed: int) -> FitResult:
+def stretched_map(posterior: Posterior, start: FitResult, method: FitMethod, seed: int) -> FitResult:
     """The MAP of a long record: the MAP from every start and every reading of the spectrum on its
     first stretch (`stretch_lengths`); then each reading within AMBIGUITY_MARGIN of the best there
     is polished on ever longer stretches (`scipy_map.polish`, whitened by the Laplace covariance of
@@ -271,7 +447,7 @@ def _summed(results: list[FitResult]) -> dict[str, float]:
     return {k: sum(r.timing.get(k, 0.0) for r in results) for k in keys}
 
 
-def _alternatives(posterior: Posterior, best: FitResult, method: str, seed: int) -> FitResult:
+def _alternatives(posterior: Posterior, best: FitResult, method: FitMethod, seed: int) -> FitResult:
     """The best of the MAPs from every reading of the spectrum (`_readings`); a reading that is not
     AMBIGUITY_MARGIN below it is reported in `diagnostics["ambiguous"]` instead of being dropped
     in silence."""
@@ -287,7 +463,7 @@ def _alternatives(posterior: Posterior, best: FitResult, method: str, seed: int)
     return winner
 
 
-def _readings(posterior: Posterior, best: FitResult, method: str, seed: int) -> list[tuple[str, FitResult]]:
+def _readings(posterior: Posterior, best: FitResult, method: FitMethod, seed: int) -> list[tuple[str, FitResult]]:
     """`best` (the MAP found first) and the MAP from each other reading of the spectrum the model
     knows (`SignalModel.alternatives`), each with what it changes."""
     space = posterior.space
@@ -328,8 +504,10 @@ def _finite(v: float | None) -> float:
     return v if v is not None and math.isfinite(v) else -math.inf
 
 
-def _map(posterior: Posterior, start: FitResult, method: str, seed: int, floor: float | None = None) -> FitResult:
-    if method != "map":
+def _map(posterior: Posterior, start: FitResult, method: FitMethod, seed: int, floor: float | None = None) -> FitResult:
+    """The MAP from `start`: casadi's unless `method` is `derivative_free`, scipy's where casadi
+    does not cover the model or fails."""
+    if not method.derivative_free:
         try:
             return CasadiMap().fit(posterior, start, seed=seed, floor=floor)
         except Unsupported as exc:

@@ -889,6 +889,8 @@ def write_report(result: Path, outdir: Path) -> Path:
     if not isinstance(sindy, dict):
         equation = ""
     elif sindy.get("status") == "ok":
+        from vibinverse.pipeline import FIT_METHODS, SindyMethod
+
         equation = (
             f'<section id="equation"><h2>Identified equation (SINDy)</h2><p><code>{_text(sindy.get("equation", ""))}</code> '
             f"(free-response misfit to the correlation function {format_number(sindy.get('misfit'), '.0%')}).</p>"
@@ -896,7 +898,7 @@ def write_report(result: Path, outdir: Path) -> Path:
                 "<p>SINDy's damping ratio is a seed, not an answer: its jackknife sd covered the truth in only "
                 "65-75 % of the estimator bench's runs where 90 % was due. The MAP and the posterior are "
                 "the numbers to quote.</p>"
-                if summary["method"] == "sindy"
+                if FIT_METHODS.get(str(summary["method"])) is SindyMethod  # the numbers are SINDy's
                 else ""
             )
             + "</section>"

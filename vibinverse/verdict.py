@@ -82,14 +82,15 @@ def format_value(value: Any, uncertainty: Any, plus_minus: str = "+-") -> str:
 
 def approximation(summary: dict) -> str | None:
     """What the intervals are when they are not quantiles of real posterior draws (None when they
-    are): the summary's `approximation`; for an older summary without it, by the method."""
+    are): the summary's `approximation`; for an older summary without it, its method's
+    (`FitMethod.approximation`), "laplace" for a method that is not one of them."""
     if "approximation" in summary:
         a = summary.get("approximation")
         return None if a is None else str(a)
-    method = str(summary.get("method", ""))
-    if method in ("mcmc", "auto"):
-        return None
-    return {"sindy": "jackknife", "spectral": "spectral"}.get(method, "laplace")
+    from vibinverse.pipeline import FIT_METHODS  # only for an older summary: the fitting stack is heavy
+
+    method = FIT_METHODS.get(str(summary.get("method", "")))
+    return "laplace" if method is None else method.approximation
 
 
 def approximation_label(kind: str | None) -> str:

@@ -32,6 +32,7 @@ from forward.sensor import observe
 from vibinverse.fisher import crlb_from_fisher
 from vibinverse.io.series import Series
 from vibinverse.models import build_model, model_class_for
+from vibinverse.pipeline import CasadiMethod, fit_method
 from vibinverse.pipeline import run as run_pipeline
 from vibinverse.posterior import Posterior
 
@@ -71,6 +72,8 @@ SCENARIOS = {
 SIGMAS = SCENARIOS["frame"].sigmas
 PARAMS = SCENARIOS["frame"].params
 METHODS = ("spectral", "sindy", "casadi", "map", "importance", "mcmc")
+#: the method whose coverage is scored on `n_coverage` data sets (the others on `n_seeds`)
+COVERAGE_METHOD = CasadiMethod
 
 
 def _table(scene_path: Path, sigma: float) -> dict:
@@ -110,7 +113,7 @@ def _fit(job: tuple) -> dict[str, Any]:
         ).summary()
         elapsed = time.perf_counter() - t0
     truth = prob.truth()
-    failed = method == "sindy" and summary["method"] != "sindy"
+    failed = fit_method(method).may_decline and summary["method"] != method  # declined: the stage before it
     diag = summary["diagnostics"]
     out = {
         "method": method,
@@ -161,7 +164,7 @@ def run(
             log(f"SNR ~{snr} (noise.sigma = {sc.sigmas[snr]:g}, line SNR {actual:.1f}):")
             fits: dict[str, list[dict]] = {}
             for method in sc.methods:
-                n = max(n_seeds, n_coverage) if method == "casadi" else n_seeds
+                n = max(n_seeds, n_coverage) if fit_method(method) is COVERAGE_METHOD else n_seeds
                 fits[method] = _fits(table, n, method, workers, max_steps, log)
             if snr in mcmc_snrs and mcmc_seeds > 0:
                 _quiet(_fit, (table, 0, "casadi", max_steps))  # compile the MAP once; forked workers inherit it
@@ -201,7 +204,7 @@ def _fits(table: dict, n: int, method: str, workers: int, max_steps: int, log, w
             rest = list(pool.map(_quiet_fit, jobs))
     else:
         rest = [_quiet(_fit, j) for j in jobs]
-    label = "emcee" if method == "mcmc" else method
+    label = fit_method(method).label
     log(f"  {label:<8} {n:>4} datasets in {time.perf_counter() - t0:6.1f} s ({workers} workers)")
     return first + rest
 
@@ -255,7 +258,9 @@ def _rows(
                 "n_failed": len(fits) - len(ok),
                 "n_declined": sum(bool(f["failed"]) for f in fits),
                 "n_undetected": sum(not f["failed"] and not f["detected"] for f in fits),
-                "n_converged": sum(bool(f.get("converged")) for f in ok) if method == "mcmc" else None,
+                "n_converged": sum(bool(f.get("converged")) for f in ok)
+                if fit_method(method).samples_by_emcee
+                else None,
             }
         )
     return out

@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import math
 import zlib
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -63,8 +64,9 @@ class Case:
     drift in units of `REFERENCE_SD` (the clean case's signal sd); `gain` the largest |g| of the
     multiplicative gain 1 + g(t); `jitter` the largest stamp displacement as a fraction of the
     nominal interval; `drop` the fraction of frames dropped; `gaps` the fraction of samples NaN (in
-    runs of 5-40); `noise` "white", "ar1" (phi `ar_phi`) or "1/f" (a sum of Ornstein-Uhlenbeck
-    processes of correlation times `flicker_times`, equal variances), always of total sd `sigma`;
+    runs of 5-40); `noise` the name of a `SensorNoise` (`NOISES`): "white", "ar1" (phi `ar_phi`) or
+    "1/f" (a sum of Ornstein-Uhlenbeck processes of correlation times `flicker_times`, equal
+    variances), always of total sd `sigma`;
     `order` (modes, lines) the order given to fitters that take one (default: the true one)."""
 
     name: str
@@ -303,6 +305,48 @@ def gain(t: np.ndarray, largest: float, rng: np.random.Generator) -> np.ndarray:
     return largest * g / np.abs(g).max()
 
 
+class SensorNoise(ABC):
+    """A kind of the cases' sensor noise (`Case.noise` names it, `NOISES`), of total sd `case.sigma`."""
+
+    name: ClassVar[str]
+
+    @abstractmethod
+    def draw(self, case: Case, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The noise at the stamps `t`."""
+
+
+class WhiteNoise(SensorNoise):
+    """Independent Gaussian samples."""
+
+    name = "white"
+
+    def draw(self, case: Case, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        return case.sigma * rng.standard_normal(t.size)
+
+
+class AR1Noise(SensorNoise):
+    """AR(1) per sample, phi `case.ar_phi` (`ar1`)."""
+
+    name = "ar1"
+
+    def draw(self, case: Case, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        return ar1(t.size, case.ar_phi, case.sigma, rng)
+
+
+class FlickerNoise(SensorNoise):
+    """1/f-like: Ornstein-Uhlenbeck processes of correlation times `case.flicker_times`, equal variances."""
+
+    name = "1/f"
+
+    def draw(self, case: Case, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        sd = case.sigma / math.sqrt(len(case.flicker_times))
+        return sum(ou(t, tau, sd, rng) for tau in case.flicker_times)
+
+
+#: the sensor noises by the name a case gives (`Case.noise`)
+NOISES: dict[str, SensorNoise] = {n.name: n for n in (WhiteNoise(), AR1Noise(), FlickerNoise())}
+
+
 def simulate_parts(case: Case | str, seed: int, quick: bool = False) -> tuple[np.ndarray, dict[str, np.ndarray], dict]:
     """(stamps, parts, truth): parts "modes" (their sum), "lines", "gain" (g), "drift", "noise" and
     "gaps" (mask); intensity = (1 + g) (level + modes + lines) + drift + noise, NaN at the gaps."""
@@ -320,15 +364,9 @@ def simulate_parts(case: Case | str, seed: int, quick: bool = False) -> tuple[np
         parts["gain"] = gain(t, case.gain, rng)
     if case.drift:
         parts["drift"] = drift(t, case.drift * REFERENCE_SD, rng)
-    if case.noise == "white":
-        parts["noise"] = case.sigma * rng.standard_normal(n)
-    elif case.noise == "ar1":
-        parts["noise"] = ar1(n, case.ar_phi, case.sigma, rng)
-    elif case.noise == "1/f":
-        sd = case.sigma / math.sqrt(len(case.flicker_times))
-        parts["noise"] = sum(ou(t, tau, sd, rng) for tau in case.flicker_times)
-    else:
+    if case.noise not in NOISES:
         raise ValueError(f"noise: {case.noise!r}")
+    parts["noise"] = NOISES[case.noise].draw(case, t, rng)
     parts["gaps"] = gap_mask(n, case.gaps, rng) if case.gaps else np.zeros(n, bool)
     truth = {
         "case": case.name,

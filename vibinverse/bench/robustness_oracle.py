@@ -19,13 +19,23 @@ miss is the search's.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
-from vibinverse.bench.robustness_cases import CASES, Case, Mode, intensity, simulate_parts
+from vibinverse.bench.robustness_cases import (
+    CASES,
+    AR1Noise,
+    Case,
+    FlickerNoise,
+    Mode,
+    WhiteNoise,
+    intensity,
+    simulate_parts,
+)
 from vibinverse.detection import DETECTION_GAIN
 
 
@@ -40,25 +50,77 @@ def mode_covariance(mode: Mode, lag: np.ndarray) -> np.ndarray:
     return mode.rms**2 * np.exp(-z * w * a) * (np.cos(wd * a) + z / math.sqrt(1.0 - z * z) * np.sin(wd * a))
 
 
-def _white_covariance(case: Case, lag: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    return np.where(steps == 0, case.sigma**2, 0.0)
+class OracleNoise(ABC):
+    """How the oracle treats a kind of the simulator's sensor noise (`Case.noise`, `ORACLE_NOISES`):
+    its autocovariance, how the modal model describes it, and whether that model's Kalman filter
+    is its exact likelihood."""
+
+    #: the modal model's `noise` for it ("white": the model's white noise alone)
+    modal_noise: ClassVar[str]
+
+    @abstractmethod
+    def covariance(self, case: Case, lag: np.ndarray, steps: np.ndarray) -> np.ndarray:
+        """The autocovariance at time lags (s) and lags in samples (`steps`)."""
+
+    def modal_values(self, case: Case) -> dict[str, float]:
+        """The modal model's noise parameters at the truth, `noise.sigma` first (0: no white noise)."""
+        return {"noise.sigma": 0.0}
+
+    def kalman_exact(self, t: np.ndarray) -> bool:
+        """Whether the modal model's Kalman filter is the noise's exact likelihood on the stamps `t`."""
+        return False
 
 
-def _ar1_covariance(case: Case, lag: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    # the simulator's AR(1) runs per sample (`ar1`): phi to the power of the lag in samples
-    return case.sigma**2 * case.ar_phi ** np.abs(steps).astype(float)
+class WhiteOracle(OracleNoise):
+    """Independent samples: the modal model's white noise."""
+
+    modal_noise = "white"
+
+    def covariance(self, case: Case, lag: np.ndarray, steps: np.ndarray) -> np.ndarray:
+        return np.where(steps == 0, case.sigma**2, 0.0)
+
+    def modal_values(self, case: Case) -> dict[str, float]:
+        return {"noise.sigma": case.sigma}
+
+    def kalman_exact(self, t: np.ndarray) -> bool:
+        return True
 
 
-def _flicker_covariance(case: Case, lag: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    var = case.sigma**2 / len(case.flicker_times)
-    return sum(var * np.exp(-np.abs(lag) / tau) for tau in case.flicker_times)
+class AR1Oracle(OracleNoise):
+    """The simulator's AR(1) runs per sample (`ar1`): an Ornstein-Uhlenbeck process, the modal
+    model's AR(1) noise, only when the samples are evenly spaced."""
+
+    modal_noise = "ar1"
+
+    def covariance(self, case: Case, lag: np.ndarray, steps: np.ndarray) -> np.ndarray:
+        # phi to the power of the lag in samples
+        return case.sigma**2 * case.ar_phi ** np.abs(steps).astype(float)
+
+    def modal_values(self, case: Case) -> dict[str, float]:
+        return {"noise.sigma": 0.0, "ar.rms": case.sigma, "ar.time": -1.0 / (case.fs * math.log(case.ar_phi))}
+
+    def kalman_exact(self, t: np.ndarray) -> bool:
+        from vibinverse.io.series import evenly_spaced
+
+        return evenly_spaced(t)
 
 
-#: the autocovariance of each kind of sensor noise at time lags (s) and lags in samples (`steps`)
-NOISE_COVARIANCES: dict[str, Callable[[Case, np.ndarray, np.ndarray], np.ndarray]] = {
-    "white": _white_covariance,
-    "ar1": _ar1_covariance,
-    "1/f": _flicker_covariance,
+class FlickerOracle(OracleNoise):
+    """A sum of Ornstein-Uhlenbeck processes: the modal model reads it as white noise (the dense
+    likelihood only)."""
+
+    modal_noise = "white"
+
+    def covariance(self, case: Case, lag: np.ndarray, steps: np.ndarray) -> np.ndarray:
+        var = case.sigma**2 / len(case.flicker_times)
+        return sum(var * np.exp(-np.abs(lag) / tau) for tau in case.flicker_times)
+
+
+#: the oracle's view of each kind of sensor noise, by the case's name of it
+ORACLE_NOISES: dict[str, OracleNoise] = {
+    WhiteNoise.name: WhiteOracle(),
+    AR1Noise.name: AR1Oracle(),
+    FlickerNoise.name: FlickerOracle(),
 }
 
 
@@ -79,13 +141,13 @@ def _lag_matrix(t: np.ndarray, kernel: Callable[[np.ndarray, np.ndarray], np.nda
 
 def _oracle_values(case: Case, truth: dict) -> dict[str, float]:
     """The modal model's parameters at the truth (its modes and lines sorted by frequency)."""
-    v = {"level": case.level, "noise.sigma": case.sigma if case.noise == "white" else 0.0}
+    noise = ORACLE_NOISES[case.noise].modal_values(case)
+    v = {"level": case.level, "noise.sigma": noise.pop("noise.sigma")}
     for i, m in enumerate(truth["modes"]):
         v.update({f"modes[{i}].{k}": m[k] for k in ("frequency", "damping_ratio", "rms")})
     for j, ln in enumerate(truth["lines"]):
         v.update({f"lines[{j}].{k}": ln[k] for k in ("frequency", "amplitude", "phase")})
-    if case.noise == "ar1":
-        v.update({"ar.rms": case.sigma, "ar.time": -1.0 / (case.fs * math.log(case.ar_phi))})
+    v.update(noise)
     return v
 
 
@@ -93,9 +155,7 @@ def kalman_exact(case: Case, t: np.ndarray) -> bool:
     """Whether the modal model's Kalman filter is the case's exact likelihood once the known drift
     is subtracted: no gain drift, and white noise, or AR(1) noise on uniform stamps (the simulator's
     AR(1) runs per sample, an Ornstein-Uhlenbeck process only when the samples are evenly spaced)."""
-    from vibinverse.io.series import evenly_spaced
-
-    return not case.gain and (case.noise == "white" or (case.noise == "ar1" and evenly_spaced(t)))
+    return not case.gain and ORACLE_NOISES[case.noise].kalman_exact(t)
 
 
 def _kalman_gains(case: Case, t: np.ndarray, parts: dict, truth: dict, model) -> dict[tuple[str, int], float]:
@@ -127,7 +187,7 @@ def _dense_gains(case: Case, t: np.ndarray, parts: dict, truth: dict, model) -> 
     s = 1.0 + parts["gain"][good]
     scale = np.outer(s, s)
     modes = [scale * _lag_matrix(t, lambda lag, _, m=Mode(**m): mode_covariance(m, lag), good) for m in truth["modes"]]  # noqa: B008 - Mode is frozen
-    noise = _lag_matrix(t, lambda lag, steps: NOISE_COVARIANCES[case.noise](case, lag, steps), good)
+    noise = _lag_matrix(t, lambda lag, steps: ORACLE_NOISES[case.noise].covariance(case, lag, steps), good)
     lines = [ln["amplitude"] * np.cos(2 * np.pi * ln["frequency"] * tt + ln["phase"]) for ln in truth["lines"]]
     r = y - s * (case.level + sum(lines, np.zeros(tt.size)))
     cov = noise + sum(modes, np.zeros_like(noise))
@@ -210,7 +270,7 @@ def oracle(
     if not case.modes and not case.lines:
         return []
     series = vi.series(t, parts["y"] - parts["drift"], source="robustness oracle")
-    spec = {"modes": len(case.modes), "lines": len(case.lines), "noise": "ar1" if case.noise == "ar1" else "white"}
+    spec = {"modes": len(case.modes), "lines": len(case.lines), "noise": ORACLE_NOISES[case.noise].modal_noise}
     model = ModalModel({"modal": spec}, series)
     how = likelihood or ("kalman" if kalman_exact(case, t) else "dense")
     if how not in ORACLE_LIKELIHOODS:

@@ -378,7 +378,9 @@ def _fit_table(args: argparse.Namespace) -> dict[str, Any]:
     if "drift" in given:
         given["drift"] = {"none": False}.get(given["drift"], given["drift"])
     if "gain" in given:
-        given["gain"] = given["gain"] == "drift"
+        from vibinverse.terms.nuisance import GAIN_WORDS
+
+        given["gain"] = bool(GAIN_WORDS.get(given["gain"], 0))  # --gain drift / none: whether the gain drifts
     return {"modal": given}
 
 

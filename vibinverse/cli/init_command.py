@@ -49,9 +49,13 @@ def _sizes(text: str) -> tuple[float, ...]:
         raise ValueError(f"invalid size {text!r} (one number, or two such as 50x30)") from None
 
 
+#: how a user may write "no frequencies" (any case)
+NO_FREQUENCIES = frozenset({"none", "-", "[]"})
+
+
 def _frequencies(text: str) -> tuple[float, ...]:
     """Space- or comma-separated frequencies; "none" (or "-") for none."""
-    if text.strip().lower() in ("none", "-", "[]"):
+    if text.strip().lower() in NO_FREQUENCIES:
         return ()
     try:
         return tuple(float(p) for p in re.split(r"[\s,]+", text.strip()) if p)

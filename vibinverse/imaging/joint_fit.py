@@ -604,28 +604,31 @@ def source_kinds(series: Any, lines: int | None = None) -> tuple[list[str], dict
     the most are. The start is each output's optimum of its kind."""
     from vibinverse.model_order import fit_order
     from vibinverse.models.modal import ModalModel, ModalSpec
+    from vibinverse.models.multi_output import LineSource, ModeSource
 
     fits = []
     for j in range(series.n_outputs):
         out = series.output(j)
         pair = {}
-        for kind, spec in (("mode", ModalSpec(modes=1)), ("line", ModalSpec(lines=1))):
+        for src in (ModeSource, LineSource):
+            spec = ModalSpec(**src.order())
             model = ModalModel({"modal": spec.table()}, out)
-            pair[kind] = fit_order(out, spec, model.guesses(model.default_priors()))
+            pair[src] = fit_order(out, spec, model.guesses(model.default_priors()))
         fits.append(pair)
-    gain = [f["line"].log_likelihood - f["mode"].log_likelihood for f in fits]
+    gain = [f[LineSource].log_likelihood - f[ModeSource].log_likelihood for f in fits]
     if lines is None:
-        kinds = ["line" if g > 0 else "mode" for g in gain]
+        chosen = [LineSource if g > 0 else ModeSource for g in gain]
     else:
         top = set(np.argsort(gain)[::-1][:lines].tolist())
-        kinds = ["line" if j in top else "mode" for j in range(len(gain))]
+        chosen = [LineSource if j in top else ModeSource for j in range(len(gain))]
+    kinds = [src.kind for src in chosen]
     start: dict[str, float] = {}
-    counts = {"mode": 0, "line": 0}
-    for j, (kind, pair) in enumerate(zip(kinds, fits)):
-        i = counts[kind]
-        counts[kind] += 1
-        base = "modes" if kind == "mode" else "lines"
-        for name, value in pair[kind].values.items():
+    counts = dict.fromkeys((ModeSource, LineSource), 0)
+    for j, (src, pair) in enumerate(zip(chosen, fits)):
+        i = counts[src]
+        counts[src] += 1
+        base = src.base
+        for name, value in pair[src].values.items():
             if name == "level":
                 start[f"outputs[{j}].level"] = float(value)
             elif name.startswith(base + "[0]."):
@@ -653,7 +656,19 @@ def combined_series(matrix: PixelMatrix, gains: PixelGains, z: np.ndarray, units
 
 
 def _is_modal(scene: Any, fit_options: Mapping[str, Any]) -> bool:
-    return scene is None or fit_options.get("model") == "modal" or (isinstance(scene, Mapping) and "modal" in scene)
+    from vibinverse.models.modal import ModalModel
+
+    return (
+        scene is None
+        or fit_options.get("model") == ModalModel.name
+        or (isinstance(scene, Mapping) and "modal" in scene)
+    )
+
+
+def _no_term(value: Any, terms: Mapping[str, Any]) -> bool:
+    """Whether a modal table's `drift` or `noise` value is the spelling of no term in `terms`
+    (`vibinverse.terms.nuisance.DRIFT_TERMS`: "none", `NOISE_TERMS`: "white")."""
+    return isinstance(value, str) and value in terms and terms[value] is None
 
 
 def fit_pixels(
@@ -775,8 +790,13 @@ def _source_table(scene: Any, r: int, series: Any) -> dict[str, Any]:
         return copy.deepcopy(dict(scene))
     if scene is not None and not (isinstance(scene, Mapping) and set(scene) <= {"modal", "infer"}):
         raise InputError(f"sources: {r} sources are fitted as modes and lines (no scene); a scene describes one signal")
+    from vibinverse.terms.nuisance import DRIFT_TERMS, NOISE_TERMS
+
     modal = dict((scene or {}).get("modal") or {})
-    if modal.get("drift") not in (None, False, "none") or modal.get("noise") not in (None, "white"):
+    drift, noise = modal.get("drift"), modal.get("noise")
+    still = drift in (None, False) or _no_term(drift, DRIFT_TERMS)
+    white = noise is None or _no_term(noise, NOISE_TERMS)
+    if not (still and white):
         raise InputError(f"sources: {r} sources are fitted in white noise; drop the drift and coloured noise")
     modes, lines = modal.get("modes"), modal.get("lines")
     if modes is not None and lines is not None and modes + lines != r:
@@ -805,10 +825,11 @@ def _fit_sources(
     from vibinverse.fitting import fit_series
     from vibinverse.imaging.pixels import cluster_lines, parse_cluster
     from vibinverse.models import build_model
+    from vibinverse.models.modal import ModalModel
     from vibinverse.models.multi_output import MultiOutputModel, multi_series
 
     model = fit_options.pop("model", None)
-    if model not in (None, "modal", MultiOutputModel.name):
+    if model not in (None, ModalModel.name, MultiOutputModel.name):
         raise InputError(f"model: {model!r}; {r} sources are fitted by the {MultiOutputModel.name!r} model")
     centres = None
     if bands is None and isinstance(pixels, str) and parse_cluster(pixels) is not None:

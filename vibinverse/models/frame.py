@@ -31,7 +31,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from forward.errors import SceneError as ForwardSceneError
-from forward.motion.frame import FrameParameters, linearize
+from forward.motion import MOTION_KINDS
+from forward.motion.frame import FrameMotion, FrameParameters, linearize
 from forward.reduce import rigid_observation
 from vibinverse.engines.state_space import Components
 from vibinverse.errors import DataError, NumericalError, SceneError, Unsupported
@@ -63,9 +64,18 @@ if TYPE_CHECKING:
 TILT_MODES = (3, 4)  # generalized coordinates rx, ry
 
 
+def motion_class(surface: dict) -> type | None:
+    """The forward model's class of a scene file's surface motion: the class whose `from_table`
+    `forward.motion.MOTION_KINDS` registers under the motion's kind (None: no motion, or a kind
+    not registered)."""
+    kind = (surface.get("motion") or {}).get("kind")
+    build = MOTION_KINDS.get(kind) if isinstance(kind, str) else None
+    return getattr(build, "__self__", None)
+
+
 def frame_surface(table: dict) -> str:
     """Name of the (single) surface whose motion is a frame."""
-    names = [n for n, s in table.get("surfaces", {}).items() if (s.get("motion") or {}).get("kind") == "frame"]
+    names = [n for n, s in table.get("surfaces", {}).items() if motion_class(s) is FrameMotion]
     if len(names) != 1:
         raise SceneError(f"fit: the scene needs exactly one surface with motion kind 'frame', found {len(names)}")
     return names[0]
@@ -102,7 +112,7 @@ class FrameModel(SignalModel):
     @classmethod
     def describes(cls, table: dict) -> bool:
         """A surface of the scene moves as a frame (noise-driven: the state-space likelihood)."""
-        return any((s.get("motion") or {}).get("kind") == "frame" for s in (table.get("surfaces") or {}).values())
+        return any(motion_class(s) is FrameMotion for s in (table.get("surfaces") or {}).values())
 
     @classmethod
     def truth_table(cls, table: dict) -> dict:

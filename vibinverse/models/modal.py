@@ -100,11 +100,12 @@ from vibinverse.models.base import (
     register_model,
 )
 from vibinverse.priors import Prior
+from vibinverse.terms.base import INTEGRATED_WALK_FORM, OSCILLATOR_FORM, WALK_FORM, DataFacts, Term
 from vibinverse.terms.drift import GAIN_LIMIT, GAIN_TERMS, gain_basis, gain_names
-from vibinverse.terms.noise import FLICKER_LOWEST_CORNER, flicker_terms, flicker_times
-from vibinverse.terms.nuisance import DRIFT_KINDS, NOISE_KINDS
+from vibinverse.terms.noise import flicker_terms
+from vibinverse.terms.nuisance import DRIFT_KINDS, DRIFT_TERMS, NOISE_KINDS, NOISE_TERMS
+from vibinverse.terms.resonance import Oscillator
 
-_OSC, _WALK, _IWALK, _OU = 0, 1, 2, 3
 #: records at least this long, uniform, without gaps or a gain drift, are fitted by Whittle's
 #: likelihood (`vibinverse.engines.whittle`; `ModalModel.spectral`), 10x cheaper per call than the
 #: Kalman filter there and within a few percent of its interval widths (tests/vibinverse/engines/test_whittle.py)
@@ -130,8 +131,22 @@ class ModalSpec:
     white: bool = True
 
     def __post_init__(self) -> None:
-        if not self.white and self.noise == "white":
+        if not self.white and not self.coloured:
             raise SceneError("modal.white: false needs a coloured noise (noise = 'ar1' or '1/f') in its place")
+
+    @property
+    def coloured(self) -> bool:
+        """Whether a coloured noise (AR(1), 1/f) is there."""
+        return NOISE_TERMS[self.noise] is not None
+
+    @property
+    def drifting(self) -> bool:
+        """Whether an additive drift is there."""
+        return DRIFT_TERMS[self.drift] is not None
+
+    def nuisance_terms(self) -> list[Term]:
+        """The drift's and the coloured noise's terms, those there (`DRIFT_TERMS`, `NOISE_TERMS`)."""
+        return [cls() for cls in (DRIFT_TERMS[self.drift], NOISE_TERMS[self.noise]) if cls is not None]
 
     @classmethod
     def from_table(cls, table: dict[str, Any]) -> ModalSpec:
@@ -180,7 +195,7 @@ class ModalSpec:
         return {
             "modes": self.modes,
             "lines": self.lines,
-            "drift": self.drift != "none" and self.drift,
+            "drift": self.drifting and self.drift,
             "noise": self.noise,
             "gain": self.gain,
             "white": self.white,
@@ -193,12 +208,8 @@ class ModalSpec:
             out += [f"modes[{i}].frequency", f"modes[{i}].damping_ratio", f"modes[{i}].rms"]
         for j in range(self.lines):
             out += [f"lines[{j}].frequency", f"lines[{j}].amplitude", f"lines[{j}].phase"]
-        if self.drift != "none":
-            out.append("drift.rate")
-        if self.noise == "ar1":
-            out += ["ar.rms", "ar.time"]
-        elif self.noise == "1/f":
-            out += ["flicker.rms", "flicker.corner"]
+        for term in self.nuisance_terms():
+            out += term.names()
         out += gain_names(self.gain)
         if self.white:
             out.append("noise.sigma")
@@ -270,25 +281,25 @@ def _oscillator(w, a, kappa, t, phi, q, o):  # pragma: no cover - compiled; test
 def _fill_tables(kinds, pars, offsets, steps, phis, qs, p0):  # pragma: no cover - compiled
     """(Phi, Q) of every block for every step, and the initial covariance P0. Block b starts at
     state offsets[b]; kinds: oscillator (w, a = zeta w, rms), random walk (rate^2), integrated
-    random walk (rate^2), Ornstein-Uhlenbeck (time, variance)."""
+    random walk (rate^2), Ornstein-Uhlenbeck (time, variance): `vibinverse.terms.base`'s forms."""
     phis[:] = 0.0
     qs[:] = 0.0
     p0[:] = 0.0
     for b in range(kinds.shape[0]):
         o = offsets[b]
         kind = kinds[b]
-        if kind == _OSC:
+        if kind == OSCILLATOR_FORM:
             w, a, rms = pars[b, 0], pars[b, 1], pars[b, 2]
             kappa = 4.0 * a * w * w * rms * rms
             for u in range(steps.shape[0]):
                 _oscillator(w, a, kappa, steps[u], phis[u], qs[u], o)
             p0[o, o] = rms * rms
             p0[o + 1, o + 1] = w * w * rms * rms
-        elif kind == _WALK:
+        elif kind == WALK_FORM:
             for u in range(steps.shape[0]):
                 phis[u, o, o] = 1.0
                 qs[u, o, o] = pars[b, 0] * steps[u]
-        elif kind == _IWALK:
+        elif kind == INTEGRATED_WALK_FORM:
             for u in range(steps.shape[0]):
                 dt = steps[u]
                 phis[u, o, o] = 1.0
@@ -495,6 +506,8 @@ class ModalModel(SignalModel):
             self.steps, self.idx = unique_steps(self.t, rtol=1e-9)
             self.steps = np.ascontiguousarray(self.steps, dtype=float)
         self._names = self.spec.names()
+        self.nuisance_terms = self.spec.nuisance_terms()
+        self.facts = self.data_facts()
         self._layout()
         if gain_shapes is not None:
             shapes = np.asarray(gain_shapes, dtype=float)
@@ -514,7 +527,10 @@ class ModalModel(SignalModel):
         with its caches emptied: the differences' periodogram without lines, the leading samples
         that carry the level and their mean (`_whittle`)."""
         self.spectral = whittle_engine(
-            self.series, not bool(self.good.all()), bool(self.spec.gain), bool(np.any(self.kinds == _IWALK))
+            self.series,
+            not bool(self.good.all()),
+            bool(self.spec.gain),
+            bool(np.any(self.kinds == INTEGRATED_WALK_FORM)),
         )
         self._power: np.ndarray | None = None
         self._transform: np.ndarray | None = None
@@ -526,27 +542,33 @@ class ModalModel(SignalModel):
         self._level_window: int | None = None
         self._leading: tuple[int, float] | None = None
 
+    def data_facts(self) -> DataFacts:
+        """What the terms read of the data (`DataFacts`): the whole record's sd, span and step (a
+        stretch of it, `head`, keeps them), the series' own Nyquist frequency, range and stamps."""
+        return DataFacts(
+            sd=self.sd,
+            span=max(self.span, self.dt),
+            dt=self.dt,
+            nyquist=0.5 * self.series.fs,
+            ymin=float(np.nanmin(self.y)),
+            ymax=float(np.nanmax(self.y)),
+            level=float(np.nanmean(self.y)),
+            time=self.t,
+            intensity=self.y,
+        )
+
     # -------------------------------------------------------------- state-space layout
     def _layout(self) -> None:
         s = self.spec
+        # the terms with states, in the state's order: the modes, then the drift and the coloured noise
+        self.state_terms = [*(Oscillator(f"modes[{i}]") for i in range(s.modes)), *self.nuisance_terms]
+        self._state_names = [term.names() for term in self.state_terms]
         kinds, offsets, sizes = [], [], []
         o = 0
-        for _ in range(s.modes):
-            kinds.append(_OSC), offsets.append(o), sizes.append(2)
-            o += 2
-        if s.drift == "walk":
-            kinds.append(_WALK), offsets.append(o), sizes.append(1)
-            o += 1
-        elif s.drift == "integrated":
-            kinds.append(_IWALK), offsets.append(o), sizes.append(2)
-            o += 2
-        if s.noise == "ar1":
-            kinds.append(_OU), offsets.append(o), sizes.append(1)
-            o += 1
-        elif s.noise == "1/f":
-            for _ in range(self.flicker_terms):
-                kinds.append(_OU), offsets.append(o), sizes.append(1)
-                o += 1
+        for term in self.state_terms:
+            for size in term.blocks(self.facts):
+                kinds.append(term.block_form), offsets.append(o), sizes.append(size)
+                o += size
         self.n = o
         self.kinds = np.array(kinds, dtype=np.int64)
         self.offsets = np.array(offsets, dtype=np.int64)
@@ -556,7 +578,7 @@ class ModalModel(SignalModel):
             lo[off : off + size], hi[off : off + size] = off, off + size
             h[off] = 1.0  # a mode's q, the drift's level, each Ornstein-Uhlenbeck state
         if o == 0:  # white noise only: one dummy state that never moves and is not seen
-            self.kinds = np.array([_WALK], dtype=np.int64)
+            self.kinds = np.array([WALK_FORM], dtype=np.int64)
             self.offsets = np.zeros(1, dtype=np.int64)
             h[0] = 0.0
         self.lo, self.hi, self.h = lo, hi, h
@@ -609,20 +631,9 @@ class ModalModel(SignalModel):
         s, v = self.spec, lambda n: self.value(values, n)
         phis, qs, p0, pars, mean, _ = self._scratch()
         b = 0
-        for i in range(s.modes):
-            w = 2.0 * math.pi * v(f"modes[{i}].frequency")
-            pars[b, 0], pars[b, 1], pars[b, 2] = w, v(f"modes[{i}].damping_ratio") * w, v(f"modes[{i}].rms")
-            b += 1
-        if s.drift != "none":
-            pars[b, 0] = v("drift.rate") ** 2
-            b += 1
-        if s.noise == "ar1":
-            pars[b, 0], pars[b, 1] = v("ar.time"), v("ar.rms") ** 2
-            b += 1
-        elif s.noise == "1/f":
-            var = v("flicker.rms") ** 2 / self.flicker_terms
-            for tau in flicker_times(max(self.span, self.dt), v("flicker.corner"), self.flicker_terms):
-                pars[b, 0], pars[b, 1] = tau, var
+        for term, names in zip(self.state_terms, self._state_names):  # each block's, in its form
+            for p in term.form_parameters({n: v(n) for n in names}, self.facts):
+                pars[b, : len(p)] = p
                 b += 1
         if b == 0:
             pars[0, 0] = 0.0
@@ -946,6 +957,7 @@ class ModalModel(SignalModel):
         out.t, out.y, out.good, out.idx = self.t[:n], self.y[:n], self.good[:n], self.idx[:n]
         out.n_obs = int(out.good.sum())
         out.gain_basis = np.ascontiguousarray(self.gain_basis[:, :n])
+        out.facts = out.data_facts()
         out.start_engine()
         return out
 
@@ -975,21 +987,18 @@ class ModalModel(SignalModel):
         """Intensity units for rms values, amplitudes, the level and the sensor noise;
         intensity / sqrt(s) for the drift rate (intensity / s^1.5 integrated); s for `ar.time`."""
         iu = intensity_units(self.series)
+        # the model's nuisance terms answer for their parameters; a name the model lacks, the first
+        # registered drift or coloured noise that has it
+        kinds = (cls() for cls in (*DRIFT_TERMS.values(), *NOISE_TERMS.values()) if cls is not None)
+        for term in (*self.nuisance_terms, *kinds):
+            if name in term.names():
+                return term.units(name, iu)
         if name.endswith(".rms"):
-            what = {"ar": "AR(1) noise", "flicker": "1/f noise"}.get(name.split(".")[0], "mode")
-            return iu, f"{what} stationary RMS"
-        if name == "drift.rate":
-            if self.spec.drift == "integrated":
-                return f"{iu} s-1.5", "drift rate (RMS slope change per sqrt(second))"
-            return f"{iu} s-0.5", "drift rate (RMS change per sqrt(second))"
+            return iu, "mode stationary RMS"
         if name.endswith(".amplitude"):
             return iu, "line amplitude"
         if name == "level":
             return iu, "level at the first sample"
-        if name == "ar.time":
-            return "s", "AR(1) correlation time"
-        if name == "flicker.corner":
-            return "Hz", "1/f noise upper corner frequency"
         if name.startswith("gain.a"):
             return "1", f"gain drift, cosine of {int(name[6:]) / 2:g} cycles per record"
         return parameter_units(name, iu)
@@ -1025,15 +1034,8 @@ class ModalModel(SignalModel):
             centre = self.value({}, f"lines[{j}].phase")  # not wrapped: the start stays at the centre
             centre = centre if math.isfinite(centre) else 0.0
             out[f"lines[{j}].phase"] = Prior("uniform", (centre - math.pi, centre + math.pi))
-        if self.spec.drift != "none":
-            scale = sd / math.sqrt(span) / (span if self.spec.drift == "integrated" else 1.0)
-            out["drift.rate"] = Prior("loguniform", (1e-5 * scale, 30.0 * scale))
-        if self.spec.noise == "ar1":
-            out["ar.rms"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
-            out["ar.time"] = Prior("loguniform", (self.dt / 5.0, span))
-        elif self.spec.noise == "1/f":
-            out["flicker.rms"] = Prior("loguniform", (1e-6 * sd, 10.0 * sd))
-            out["flicker.corner"] = Prior("loguniform", (min(FLICKER_LOWEST_CORNER / span, 0.1 * nyq), nyq))
+        for term in self.nuisance_terms:
+            out.update(term.priors(self.facts))
         for n in gain_names(self.spec.gain):
             out[n] = Prior("uniform", (-GAIN_LIMIT, GAIN_LIMIT))
         if self.spec.white:
@@ -1086,18 +1088,12 @@ class ModalModel(SignalModel):
             assignments.append(order[s.lines :] + order[: s.lines])
         base = {
             "level": float(np.nanmean(self.y[: max(16, self.t.size // 50)]))
-            if s.drift != "none"
+            if s.drifting
             else float(np.nanmean(self.y)),
             "noise.sigma": math.sqrt(max(floor, 1e-30 * self.sd**2)),
-            "drift.rate": 0.1 * self.sd / math.sqrt(max(self.span, self.dt)),
-            "ar.rms": 0.5 * self.sd,
-            "ar.time": 10.0 * self.dt,
-            "flicker.rms": 0.3 * self.sd,
-            "flicker.corner": 0.5 * nyq,
+            **{k: x for term in self.nuisance_terms for k, x in term.starts(self.facts).items()},
             **dict(zip(gain_names(s.gain), map(float, self.gain_start()))),
         }
-        if s.drift == "integrated":
-            base["drift.rate"] /= max(self.span, self.dt)
         out = []
         from vibinverse.spectrum import sinusoid
 
@@ -1212,14 +1208,8 @@ class ModalModel(SignalModel):
                     "harmonic": multiple,
                 }
             )
-        if s.drift != "none":
-            out.append({"kind": "drift", "model": s.drift, "rate": v("drift.rate")})
-        if s.noise == "ar1":
-            out.append({"kind": "coloured noise", "model": "ar1", "rms": v("ar.rms"), "time": v("ar.time")})
-        elif s.noise == "1/f":
-            out.append(
-                {"kind": "coloured noise", "model": "1/f", "rms": v("flicker.rms"), "corner": v("flicker.corner")}
-            )
+        for term in self.nuisance_terms:
+            out.append(term.component({n: v(n) for n in term.names()}, self.facts))
         if s.gain:
             g = self.multiplier(values) - 1.0
             out.append(

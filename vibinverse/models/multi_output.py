@@ -47,7 +47,7 @@ import hashlib
 import math
 import threading
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -59,7 +59,6 @@ from vibinverse.models.base import LineTest, SignalModel, observed_information, 
 from vibinverse.models.modal import ModalModel
 from vibinverse.priors import Prior
 
-SOURCE_KINDS = ("mode", "line")
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -111,7 +110,66 @@ def multi_series(
     )
 
 
-# ------------------------------------------------------------------ compiled kernels
+# ------------------------------------------------------------------ the sources
+
+
+class Source:
+    """A kind of source of one output: its name in the table (`multi_output.sources`), the modal
+    model's component it is (`base`: its parameters `{base}[i].{field}`), the states it adds to the
+    filter (observed by its first) and the parameter whose zero removes it (its line test)."""
+
+    kind: ClassVar[str]
+    base: ClassVar[str]
+    fields: ClassVar[tuple[str, ...]]
+    states: ClassVar[int]
+    null: ClassVar[str]
+    #: a line of fixed amplitude (`LineTest.deterministic`)
+    deterministic: ClassVar[bool] = False
+
+    @classmethod
+    def names(cls, i: int) -> list[str]:
+        """The parameters of the i-th source of this kind."""
+        return [f"{cls.base}[{i}].{f}" for f in cls.fields]
+
+    @classmethod
+    def order(cls) -> dict[str, int]:
+        """The one-component modal model's `modes` and `lines` of this kind."""
+        return {**dict.fromkeys(SOURCE_BASES, 0), cls.base: 1}
+
+    @classmethod
+    def line_test(cls, i: int, free: list[str]) -> LineTest:
+        """The test of the i-th source of this kind: its `null` parameter to 0."""
+        f = f"{cls.base}[{i}].frequency"
+        return LineTest(
+            f"{cls.kind}_{i}", {f"{cls.base}[{i}].{cls.null}": 0.0}, f if f in free else None, cls.deterministic
+        )
+
+
+class ModeSource(Source):
+    """A stochastic resonance (two states: q, q')."""
+
+    kind = "mode"
+    base = "modes"
+    fields = ("frequency", "damping_ratio", "rms")
+    states = 2
+    null = "rms"
+
+
+class LineSource(Source):
+    """A deterministic line (the mean; no state)."""
+
+    kind = "line"
+    base = "lines"
+    fields = ("frequency", "amplitude", "phase")
+    states = 0
+    null = "amplitude"
+    deterministic = True
+
+
+#: the kinds of source by their table name
+SOURCES: dict[str, type[Source]] = {c.kind: c for c in (ModeSource, LineSource)}
+SOURCE_KINDS = tuple(SOURCES)
+SOURCE_BASES = tuple(c.base for c in SOURCES.values())
 
 
 # ------------------------------------------------------------------ the model
@@ -153,6 +211,7 @@ class MultiOutputModel(SignalModel):
         digest = hashlib.sha256(series.outputs.tobytes() + series.covariance.tobytes()).hexdigest()[:16]
         spec["data"] = digest
         self.kinds = [str(k) for k in kinds]
+        self.sources = [SOURCES[k] for k in self.kinds]
         self.series = series
         self.r = series.n_outputs
         self.t = np.ascontiguousarray(series.time, dtype=float)
@@ -160,27 +219,32 @@ class MultiOutputModel(SignalModel):
         self.cov = np.ascontiguousarray(series.covariance, dtype=float)
         self.good = np.isfinite(self.z)
         self.sd = float(np.nanstd(self.z)) or 1.0
-        # per output: (index among its kind, a one-component modal model of that output alone)
+        # per output: its index among its kind, its states in the filter (None: none), and a
+        # one-component modal model of that output alone
         self.index: list[int] = []
+        self.blocks: list[slice | None] = []
         self.inner: list[ModalModel] = []
-        counts = {"mode": 0, "line": 0}
-        for j, kind in enumerate(self.kinds):
-            self.index.append(counts[kind])
-            counts[kind] += 1
-            order = {"modes": int(kind == "mode"), "lines": int(kind == "line"), "drift": False, "noise": "white"}
+        counts = dict.fromkeys(SOURCES.values(), 0)
+        states = 0
+        for j, src in enumerate(self.sources):
+            self.index.append(counts[src])
+            counts[src] += 1
+            self.blocks.append(slice(states, states + src.states) if src.states else None)
+            states += src.states
+            order = {**src.order(), "drift": False, "noise": "white"}
             self.inner.append(ModalModel({"modal": order}, series.output(j)))
-        self.n_modes, self.n_lines = counts["mode"], counts["line"]
+        self.n_modes, self.n_lines = counts[ModeSource], counts[LineSource]
         self.steps, self.idx = self.inner[0].steps, np.ascontiguousarray(self.inner[0].idx, dtype=np.int64)
-        self.n = max(2 * self.n_modes, 1)  # one dummy state nobody sees when there is no mode
+        self.states = states
+        self.n = max(states, 1)  # one dummy state nobody sees when no source has a state
         self.h = np.zeros((self.r, self.n))
         self.lo = np.zeros(self.n, dtype=np.int64)
         self.hi = np.ones(self.n, dtype=np.int64)
-        for j, kind in enumerate(self.kinds):
-            if kind == "mode":
-                o = 2 * self.index[j]
-                self.h[j, o] = 1.0
-                self.lo[o : o + 2], self.hi[o : o + 2] = o, o + 2
-        if self.n_modes == 0:
+        for j, blk in enumerate(self.blocks):
+            if blk is not None:
+                self.h[j, blk.start] = 1.0
+                self.lo[blk], self.hi[blk] = blk.start, blk.stop
+        if states == 0:
             self.lo[0], self.hi[0] = 0, 1
         self._names = self._all_names()
         self._fixed = {k: float(v) for k, v in (spec.get("values") or {}).items()}
@@ -191,21 +255,15 @@ class MultiOutputModel(SignalModel):
     # -------------------------------------------------------------- names
     def _all_names(self) -> list[str]:
         out = [f"outputs[{j}].level" for j in range(self.r)]
-        for j, kind in enumerate(self.kinds):
-            i = self.index[j]
-            if kind == "mode":
-                out += [f"modes[{i}].frequency", f"modes[{i}].damping_ratio", f"modes[{i}].rms"]
-            else:
-                out += [f"lines[{i}].frequency", f"lines[{i}].amplitude", f"lines[{i}].phase"]
+        for src, i in zip(self.sources, self.index):
+            out += src.names(i)
         return [*out, "noise.scale"]
 
     def _output_names(self, j: int) -> dict[str, str]:
         """This model's names of output j's parameters -> its one-component modal model's names."""
-        kind, i = self.kinds[j], self.index[j]
-        base = "modes" if kind == "mode" else "lines"
-        fields = ("frequency", "damping_ratio", "rms") if kind == "mode" else ("frequency", "amplitude", "phase")
+        src = self.sources[j]
         out = {f"outputs[{j}].level": "level"}
-        out.update({f"{base}[{i}].{f}": f"{base}[0].{f}" for f in fields})
+        out.update(zip(src.names(self.index[j]), src.names(0)))
         return out
 
     def output_of(self, name: str) -> int | None:
@@ -248,16 +306,15 @@ class MultiOutputModel(SignalModel):
         mean from the one-component modal model of its output (`ModalModel.tables`). The arrays
         are reused by the next call in this thread."""
         phis, qs, p0, means = self._scratch()
-        if self.n_modes == 0:
+        if self.states == 0:
             phis[:, 0, 0] = 1.0
-        for j, kind in enumerate(self.kinds):
+        for j, blk in enumerate(self.blocks):
             mean, ph, q, _, p = self.inner[j].tables(self._inner_values(values, j))
             means[:, j] = mean
-            if kind == "mode":
-                o = 2 * self.index[j]
-                phis[:, o : o + 2, o : o + 2] = ph
-                qs[:, o : o + 2, o : o + 2] = q
-                p0[o : o + 2, o : o + 2] = p
+            if blk is not None:
+                phis[:, blk, blk] = ph
+                qs[:, blk, blk] = q
+                p0[blk, blk] = p
         return means, phis, qs, p0
 
     def _valid(self, values: dict[str, float]) -> bool:
@@ -330,10 +387,8 @@ class MultiOutputModel(SignalModel):
         covariance scale^2 C), NaN where the data miss."""
         means, phis, qs, p0 = self.tables(values)
         out = means.copy()
-        for j, kind in enumerate(self.kinds):
-            if kind == "mode":
-                o = 2 * self.index[j]
-                blk = slice(o, o + 2)
+        for j, blk in enumerate(self.blocks):
+            if blk is not None:
                 out[:, j] += simulate(phis[:, blk, blk], qs[:, blk, blk], self.idx, [1.0, 0.0], 0.0, p0[blk, blk], rng)
         chol = np.linalg.cholesky(self.cov) * self.value(values, "noise.scale")
         out += rng.standard_normal((self.t.size, self.r)) @ chol.T
@@ -379,17 +434,8 @@ class MultiOutputModel(SignalModel):
         return [{**self._spectral_guess(), **self._start}]
 
     def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
-        """Each line (its amplitude to 0) and each mode (its rms to 0)."""
-        out = []
-        for j, kind in enumerate(self.kinds):
-            i = self.index[j]
-            if kind == "line":
-                f = f"lines[{i}].frequency"
-                out.append(LineTest(f"line_{i}", {f"lines[{i}].amplitude": 0.0}, f if f in free else None, True))
-            else:
-                f = f"modes[{i}].frequency"
-                out.append(LineTest(f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None))
-        return out
+        """Each line (its amplitude to 0) and each mode (its rms to 0): `Source.line_test`."""
+        return [src.line_test(i, free) for src, i in zip(self.sources, self.index)]
 
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
         """The observed information -d^2 log L / d theta^2 at `values` by central differences of
@@ -415,21 +461,9 @@ class MultiOutputModel(SignalModel):
         parameters, and the output's level."""
         v = lambda n: float(self.value(values, n))
         out: list[dict[str, Any]] = []
-        for j, kind in enumerate(self.kinds):
-            i = self.index[j]
-            row: dict[str, Any] = {"kind": kind, "output": j, "index": i, "level": v(f"outputs[{j}].level")}
-            if kind == "mode":
-                row.update(
-                    frequency=v(f"modes[{i}].frequency"),
-                    damping_ratio=v(f"modes[{i}].damping_ratio"),
-                    rms=v(f"modes[{i}].rms"),
-                )
-            else:
-                row.update(
-                    frequency=v(f"lines[{i}].frequency"),
-                    amplitude=v(f"lines[{i}].amplitude"),
-                    phase=v(f"lines[{i}].phase"),
-                )
+        for j, (src, i) in enumerate(zip(self.sources, self.index)):
+            row: dict[str, Any] = {"kind": src.kind, "output": j, "index": i, "level": v(f"outputs[{j}].level")}
+            row.update({f: v(n) for f, n in zip(src.fields, src.names(i))})
             out.append(row)
         out.append({"kind": "white noise", "covariance": self.cov.tolist(), "scale": v("noise.scale")})
         return out

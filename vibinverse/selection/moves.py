@@ -9,11 +9,9 @@ from dataclasses import replace
 from typing import ClassVar
 
 from vibinverse.terms.drift import GAIN_TERMS, RandomWalk
-from vibinverse.terms.nuisance import DRIFT_TERMS, NOISE_TERMS, NuisanceSpec
+from vibinverse.terms.nuisance import DRIFT_TERMS, NO_DRIFT, NO_NOISE, NOISE_TERMS, NuisanceSpec
 
 Proposal = tuple[str, NuisanceSpec]
-NO_NOISE = next(k for k, cls in NOISE_TERMS.items() if cls is None)  # the table's spelling of "none"
-NO_DRIFT = next(k for k, cls in DRIFT_TERMS.items() if cls is None)
 
 
 def _label(terms: dict, kind: str) -> str:

@@ -7,6 +7,8 @@ A term is one small class that owns everything the engine and the estimators nee
 - its state-space block(s) (`blocks`, `fill`): transition and process noise discretized exactly over
   any time step, uniform or irregular, and the initial covariance;
 - its observation row (`observe`), and whether a gain drift multiplies it (`scaled`);
+- for a compiled kernel (the modal model's), which elementary form its blocks are (`block_form`) and
+  their parameters (`form_parameters`);
 - the white measurement noise it adds (`measurement_variance`) and its multiplier on the whole
   signal (`multiplier`, the gain drift's);
 - its one-sided power spectral density (`psd`, intensity^2 / Hz, whose integral over (0, inf) is
@@ -68,6 +70,12 @@ class DataFacts:
         )
 
 
+#: the elementary blocks a compiled kernel fills by number (`vibinverse.models.modal`'s tables): a
+#: 2 x 2 oscillator (w, zeta w, rms), a random walk (rate^2), an integrated random walk (rate^2) and
+#: an Ornstein-Uhlenbeck state (time, variance)
+OSCILLATOR_FORM, WALK_FORM, INTEGRATED_WALK_FORM, OU_FORM = 0, 1, 2, 3
+
+
 class Term(ABC):
     """One additive (or, for a gain drift, multiplicative) part of a measured series."""
 
@@ -76,6 +84,8 @@ class Term(ABC):
     #: the gain drift multiplies this term's observation (a signal term: the vibration is dimmed
     #: with the light), not a nuisance term's (sensor noise, a drift of the electronics)
     scaled: ClassVar[bool] = False
+    #: the elementary form (`OSCILLATOR_FORM` ..) of each of its blocks; None: it has no blocks
+    block_form: ClassVar[int | None] = None
 
     def names(self) -> list[str]:
         """Its parameters' names, in a fixed order."""
@@ -97,6 +107,10 @@ class Term(ABC):
     ) -> None:
         """Write its blocks' exact (Phi, Q) for every step (phis[u], qs[u]) and its initial
         covariance into the tables, starting at state `offset`."""
+
+    def form_parameters(self, values: Mapping[str, float], facts: DataFacts) -> list[tuple[float, ...]]:
+        """The parameters of each of its blocks in its `block_form`, for a compiled kernel."""
+        return []
 
     def observe(self, h: np.ndarray, offset: int, facts: DataFacts) -> None:
         """Write its observation row (the first state of each block is seen, by default)."""

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from vibinverse.priors import Prior
-from vibinverse.terms.base import DataFacts, Term, register_term
+from vibinverse.terms.base import INTEGRATED_WALK_FORM, WALK_FORM, DataFacts, Term, register_term
 
 GAIN_TERMS = 6  # the gain drift's cosines: 0.5 to 3 cycles per record
 GAIN_LIMIT = 0.5  # each coefficient's prior: uniform (-limit, limit)
@@ -54,12 +54,16 @@ class RandomWalk(Term):
 
     kind = "walk"
     label = "random-walk drift"
+    block_form = WALK_FORM
 
     def names(self) -> list[str]:
         return ["drift.rate"]
 
     def blocks(self, facts: DataFacts) -> list[int]:
         return [1]
+
+    def form_parameters(self, values: Mapping[str, float], facts: DataFacts) -> list[tuple[float, ...]]:
+        return [(float(values["drift.rate"]) ** 2,)]
 
     def fill(self, values, steps, phis, qs, p0, offset, facts) -> None:
         phis[:, offset, offset] = 1.0
@@ -87,12 +91,16 @@ class IntegratedWalk(Term):
 
     kind = "integrated"
     label = "integrated random-walk drift"
+    block_form = INTEGRATED_WALK_FORM
 
     def names(self) -> list[str]:
         return ["drift.rate"]
 
     def blocks(self, facts: DataFacts) -> list[int]:
         return [2]
+
+    def form_parameters(self, values: Mapping[str, float], facts: DataFacts) -> list[tuple[float, ...]]:
+        return [(float(values["drift.rate"]) ** 2,)]
 
     def fill(self, values, steps, phis, qs, p0, offset, facts) -> None:
         o, q = offset, float(values["drift.rate"]) ** 2

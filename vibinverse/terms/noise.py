@@ -9,18 +9,22 @@
   rms^2 / K, their corners spread evenly in log frequency from one cycle per record to `corner`
   (Hz; `flicker_times`), K one for each decade from one cycle per record to Nyquist
   (`flicker_terms`): a spectrum ~ 1/f between those, ~ 1/f^2 above.
+
+AR(1) and 1/f noise are `ColouredNoise`: each also says where the modal model's order search
+(`vibinverse.model_order`) starts it, beside white noise or in another coloured noise's place.
 """
 
 from __future__ import annotations
 
 import math
+from abc import abstractmethod
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from vibinverse.priors import Prior
-from vibinverse.terms.base import DataFacts, Term, register_term
+from vibinverse.terms.base import OU_FORM, DataFacts, Term, register_term
 
 FLICKER_MIN_TERMS = 3  # the 1/f term's fewest Ornstein-Uhlenbeck states (`flicker_terms`)
 FLICKER_LOWEST_CORNER = 10.0  # cycles per record: the 1/f term's upper corner's prior starts here
@@ -54,6 +58,12 @@ def ou_psd(tau: float, var: float, f: np.ndarray) -> np.ndarray:
     return 4.0 * var * tau / (1.0 + (2.0 * math.pi * np.asarray(f) * tau) ** 2)
 
 
+def _white_rest(sigma: float, share: float) -> float:
+    """The white noise's sd when a coloured noise takes `share` of a noise of sd `sigma` (at least
+    5 % of its variance left)."""
+    return sigma * math.sqrt(max(1 - share * share, 0.05))
+
+
 @register_term
 class White(Term):
     """White sensor noise of standard deviation `noise.sigma` (the measurement noise)."""
@@ -85,18 +95,59 @@ class White(Term):
         return {"kind": "white noise", "sigma": float(values["noise.sigma"])}
 
 
+class ColouredNoise(Term):
+    """A coloured sensor noise, of stationary RMS `rms_name`; it also says where the order search
+    (`vibinverse.model_order`) starts it."""
+
+    rms_name: ClassVar[str]
+    block_form = OU_FORM
+
+    @abstractmethod
+    def correlation_time(self, values: Mapping[str, float]) -> float:
+        """Its (shortest) correlation time (s) at `values`."""
+
+    @abstractmethod
+    def screen_starts(self, sigma: float, dt: float, span: float) -> list[dict[str, float]]:
+        """Its values, and the white noise's sd, on a grid to screen when it joins white noise of sd
+        `sigma` (samples `dt` s apart over `span` s): it takes a share of that noise."""
+
+    @abstractmethod
+    def replacing(self, old: ColouredNoise, values: Mapping[str, float], dt: float) -> list[dict[str, float]]:
+        """Starts in the place of the coloured noise `old`: `values` (which hold `old`'s) with its
+        own values added (samples `dt` s apart)."""
+
+
 @register_term
-class AR1(Term):
+class AR1(ColouredNoise):
     """AR(1) noise: one Ornstein-Uhlenbeck state (`ar.rms`, `ar.time`)."""
 
     kind = "ar1"
     label = "AR(1) noise"
+    rms_name = "ar.rms"
 
     def names(self) -> list[str]:
         return ["ar.rms", "ar.time"]
 
     def blocks(self, facts: DataFacts) -> list[int]:
         return [1]
+
+    def form_parameters(self, values: Mapping[str, float], facts: DataFacts) -> list[tuple[float, ...]]:
+        return [(float(values["ar.time"]), float(values["ar.rms"]) ** 2)]
+
+    def correlation_time(self, values: Mapping[str, float]) -> float:
+        return float(values["ar.time"])
+
+    def screen_starts(self, sigma: float, dt: float, span: float) -> list[dict[str, float]]:
+        """Shares 0.3 and 0.9 of the noise, correlation times of 2, 10 and 50 samples."""
+        return [
+            {"ar.rms": c * sigma, "ar.time": tau * dt, "noise.sigma": _white_rest(sigma, c)}
+            for tau in (2.0, 10.0, 50.0)
+            for c in (0.3, 0.9)
+        ]
+
+    def replacing(self, old: ColouredNoise, values: Mapping[str, float], dt: float) -> list[dict[str, float]]:
+        """`old`'s rms, correlation times of 3 and 30 samples."""
+        return [{**values, "ar.rms": values[old.rms_name], "ar.time": tau * dt} for tau in (3.0, 30.0)]
 
     def fill(self, values, steps, phis, qs, p0, offset, facts) -> None:
         var = float(values["ar.rms"]) ** 2
@@ -131,11 +182,12 @@ class AR1(Term):
 
 
 @register_term
-class Flicker(Term):
+class Flicker(ColouredNoise):
     """1/f noise: Ornstein-Uhlenbeck states spread in log frequency (`flicker.rms`, `flicker.corner`)."""
 
     kind = "1/f"
     label = "1/f noise"
+    rms_name = "flicker.rms"
 
     def names(self) -> list[str]:
         return ["flicker.rms", "flicker.corner"]
@@ -146,6 +198,33 @@ class Flicker(Term):
     def _states(self, values: Mapping[str, float], facts: DataFacts) -> tuple[list[float], float]:
         k = flicker_terms(facts.span, facts.dt)
         return flicker_times(facts.span, float(values["flicker.corner"]), k), float(values["flicker.rms"]) ** 2 / k
+
+    def form_parameters(self, values: Mapping[str, float], facts: DataFacts) -> list[tuple[float, ...]]:
+        times, var = self._states(values, facts)
+        return [(tau, var) for tau in times]
+
+    def correlation_time(self, values: Mapping[str, float]) -> float:
+        """That of its fastest state, at the upper corner: 1 / (2 pi corner)."""
+        return 1.0 / (2.0 * math.pi * float(values["flicker.corner"]))
+
+    def screen_starts(self, sigma: float, dt: float, span: float) -> list[dict[str, float]]:
+        """Shares 0.1, 0.3 and 0.9 of the noise, upper corners at 1, 0.2 and 0.04 of Nyquist (at
+        least its prior's lowest, FLICKER_LOWEST_CORNER cycles per record)."""
+        nyq = 0.5 / dt
+        return [
+            {
+                "flicker.rms": c * sigma,
+                "flicker.corner": max(corner * nyq, FLICKER_LOWEST_CORNER / span),
+                "noise.sigma": _white_rest(sigma, c),
+            }
+            for corner in (1.0, 0.2, 0.04)
+            for c in (0.1, 0.3, 0.9)
+        ]
+
+    def replacing(self, old: ColouredNoise, values: Mapping[str, float], dt: float) -> list[dict[str, float]]:
+        """`old`'s rms, the upper corner at Nyquist and at `old`'s correlation time's corner."""
+        corners = (0.5 / dt, 1.0 / (2.0 * math.pi * old.correlation_time(values)))
+        return [{**values, "flicker.rms": values[old.rms_name], "flicker.corner": c} for c in corners]
 
     def fill(self, values, steps, phis, qs, p0, offset, facts) -> None:
         times, var = self._states(values, facts)

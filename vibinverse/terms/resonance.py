@@ -17,7 +17,7 @@ import numpy as np
 from vibinverse.io.series import MIN_CYCLES
 from vibinverse.kalman import oscillator_fill
 from vibinverse.priors import Prior
-from vibinverse.terms.base import DataFacts, Term, register_term
+from vibinverse.terms.base import OSCILLATOR_FORM, DataFacts, Term, register_term
 
 
 @register_term
@@ -27,6 +27,7 @@ class Oscillator(Term):
     kind = "oscillator"
     label = "resonance"
     scaled = True
+    block_form = OSCILLATOR_FORM
 
     def __init__(self, prefix: str = "modes[0]"):
         self.prefix = prefix
@@ -42,6 +43,9 @@ class Oscillator(Term):
         f, zeta, rms = (float(values[n]) for n in self.names())
         w = 2.0 * math.pi * f
         return w, zeta * w, rms
+
+    def form_parameters(self, values: Mapping[str, float], facts: DataFacts) -> list[tuple[float, ...]]:
+        return [self._wa(values)]
 
     def fill(self, values, steps, phis, qs, p0, offset, facts) -> None:
         w, a, rms = self._wa(values)
