@@ -115,7 +115,7 @@ class _Fitted:
 
 
 @dataclass
-class _Peak:
+class Peak:
     f: float
     zeta: float
     prominence: float
@@ -145,7 +145,7 @@ def relative_smooth(freqs: np.ndarray, values: np.ndarray) -> np.ndarray:
     return (c[hi] - c[lo]) / (hi - lo)
 
 
-def pick_peaks(sv: SingularValues, span: float, count: int | None) -> list[_Peak]:
+def pick_peaks(sv: SingularValues, span: float, count: int | None, prominence: float = PROMINENCE) -> list[Peak]:
     """The first singular value's peaks (module docstring, stage 1), strongest first."""
     # Welch's 15 segments leave a long record's peak top ragged, and a width read on a noise spike
     # sets a band too narrow for the mode under it: averaged over +-SMOOTH_WIDTH first
@@ -157,7 +157,7 @@ def pick_peaks(sv: SingularValues, span: float, count: int | None) -> list[_Peak
     # (its flanks' and top's ripples do not)
     idx, _ = signal.find_peaks(s1)
     prom_all = s1 - local_baseline(sv.freqs, s1)
-    keep = (sv.freqs[idx] >= max(lo, 2 * df)) & (prom_all[idx] >= (PROMINENCE if count is None else 0.05))
+    keep = (sv.freqs[idx] >= max(lo, 2 * df)) & (prom_all[idx] >= (prominence if count is None else 0.05))
     idx = idx[keep]
     if count is None:  # within +-LOCAL_WIDTH (relative, >= BASELINE_BINS): a hump's top, not its ripples
         local = np.array(
@@ -172,7 +172,7 @@ def pick_peaks(sv: SingularValues, span: float, count: int | None) -> list[_Peak
     prom = prom_all[idx]
     order = np.argsort(prom)[::-1]
     wanted = count if count is not None else MAX_BANDS
-    peaks: list[_Peak] = []
+    peaks: list[Peak] = []
     spans: list[tuple[float, float]] = []
     for i, p in zip(idx[order], prom[order], strict=True):
         if any(a <= sv.freqs[i] <= b for a, b in spans):
@@ -187,22 +187,22 @@ def pick_peaks(sv: SingularValues, span: float, count: int | None) -> list[_Peak
         smear = df + SMOOTH_WIDTH * sv.freqs[i]  # the Hann window's and the smoothing's own widths
         width = max((sv.freqs[b] - sv.freqs[a]) / 2.0 - smear, df / 2.0)
         zeta = float(np.clip(width / sv.freqs[i], START_ZETA, 0.2))
-        peaks.append(_Peak(float(sv.freqs[i]), zeta, float(p)))
+        peaks.append(Peak(float(sv.freqs[i]), zeta, float(p)))
         if len(peaks) == wanted:
             break
     return peaks
 
 
-def _band_of(p: _Peak, resolution: float) -> tuple[float, float]:
+def _band_of(p: Peak, resolution: float) -> tuple[float, float]:
     zeta = min(max(p.zeta, MIN_BAND_ZETA), MAX_BAND_ZETA)
     half = max(BAND_WIDTHS * zeta * p.f, MIN_ORDINATES / 2 * resolution)
     return max(p.f - half, resolution / 2), p.f + half
 
 
-def group_bands(peaks: list[_Peak], resolution: float, nyquist: float) -> list[tuple[float, float, list[_Peak]]]:
+def group_bands(peaks: list[Peak], resolution: float, nyquist: float) -> list[tuple[float, float, list[Peak]]]:
     """Bands around the peaks, overlapping ones merged (module docstring, stage 2)."""
     spans = sorted(((*_band_of(p, resolution), p) for p in peaks), key=lambda t: t[0])
-    out: list[tuple[float, float, list[_Peak]]] = []
+    out: list[tuple[float, float, list[Peak]]] = []
     for lo, hi, p in spans:
         hi = min(hi, nyquist)
         if out and lo <= out[-1][1]:
@@ -490,7 +490,7 @@ def _order_fits(
     return out
 
 
-def _starts(group: list[_Peak]) -> list[tuple[float, float]]:
+def _starts(group: list[Peak]) -> list[tuple[float, float]]:
     """(f, zeta) starts of a band's modes, the strongest first."""
     return [(p.f, p.zeta) for p in sorted(group, key=lambda p: -p.prominence)]
 
@@ -516,7 +516,12 @@ def identify(
     """Modes, damping ratios and unit shapes with 90 % intervals from a multi-channel record (module
     docstring). `modes`: the number of modes (default: chosen per band by BIC); `quantity`:
     displacement, velocity or acceleration (default: from the channels' units, else acceleration);
-    `band`: (lo, hi) Hz to search (default: all)."""
+    `band`: (lo, hi) Hz to search (default: all). A channel flagged as a measured input makes it an
+    input-output identification (`vibinverse.oma.input_output.identify_io`)."""
+    if channels.inputs:  # a measured excitation: the responses fitted given it
+        from vibinverse.oma.input_output import identify_io
+
+        return identify_io(channels, modes=modes, quantity=quantity, band=band, seed=seed)
     t0 = time.perf_counter()
     if quantity is None:
         quantity = quantity_of(channels.units)
@@ -548,7 +553,7 @@ def identify(
     estimates = peaks
     for _ in range(PASSES):
         fitted: list[_Fitted] = []
-        kept: list[_Peak] = []  # peaks whose fit went broad: tried again in the order search
+        kept: list[Peak] = []  # peaks whose fit went broad: tried again in the order search
         for lo, hi, group in group_bands(estimates, ords.resolution, nyq):
             others = [o for o in current if not lo <= o.f <= hi]
             fitter = _BandFitter(ords, lo, hi, power, others)
@@ -559,7 +564,7 @@ def identify(
             fitted += narrow
             kept += [p for p in group if all(abs(o.f - p.f) > 3 * p.zeta * p.f for o in narrow)]
         current = fitted
-        estimates = [_Peak(o.f, o.zeta, o.height) for o in current] + kept
+        estimates = [Peak(o.f, o.zeta, o.height) for o in current] + kept
     found: list[OmaMode] = []
     fits: list[BandFit] = []
     for lo, hi, group in group_bands(estimates, ords.resolution, nyq):
