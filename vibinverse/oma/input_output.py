@@ -59,9 +59,15 @@ class IOBand:
         self.residual = np.column_stack([force, force / (2.0 * math.pi * freqs) ** 2])
 
     def design(self, f: np.ndarray, zeta: np.ndarray) -> np.ndarray:
-        """(J, M + 2) complex columns: h_m F, F, F / W^2."""
-        cols = [receptance(a, b, self.freqs, self.power) * self.force for a, b in zip(f, zeta, strict=True)]
-        return np.column_stack([*cols, self.residual]) if cols else self.residual
+        """(J, 3M + 2) complex columns: h_m F (the forced response), F, F / W^2 (residuals), and per
+        mode h_m and i W h_m without F: the transient term of a finite record (the modal states'
+        difference between its start and end, Pintelon & Schoukens), whose truncated ringing would
+        otherwise read as extra damping."""
+        hs = [receptance(a, b, self.freqs, self.power) for a, b in zip(f, zeta, strict=True)]
+        big_w = 2.0 * math.pi * self.freqs
+        forced = [h * self.force for h in hs]
+        transient = [c for h in hs for c in (h, 1j * big_w * h)]
+        return np.column_stack([*forced, self.residual, *transient]) if hs else self.residual
 
     def solve(self, f: np.ndarray, zeta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(coefficients (M + 2, C) real, noise n (C,), the real design's (X^T X)^-1)."""
@@ -209,7 +215,7 @@ def identify_io(
             theta, ll = io.fit(s_m)
             if not math.isfinite(ll):
                 continue
-            k = 2 * m + (m + 2) * y.shape[1] + y.shape[1]
+            k = 2 * m + (3 * m + 2) * y.shape[1] + y.shape[1]
             bic = -2.0 * ll + k * math.log(nobs)
             fm, zm = np.exp(theta[:m]), np.exp(theta[m:])
             ok = bool(np.all(zm <= 0.1)) and bool(np.all(2 * zm * fm >= resolution))
