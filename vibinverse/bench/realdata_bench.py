@@ -345,7 +345,7 @@ def fit_channels(path: str, spec: ChannelsInput) -> dict[str, Any]:
         "duration_s": float(ch.time[-1] - ch.time[0]),
         "n_samples": int(ch.time.size),
         "note": f"{', '.join(result.names)}: load_channels; {spec.note}",
-        "approximation": "bayesian-fft + Laplace",
+        "approximation": result.method,
     }
 
 

@@ -31,14 +31,14 @@ from scipy import optimize, signal
 
 from vibinverse.errors import DataError, InputError
 from vibinverse.io.channels import Channels
-from vibinverse.oma.band_model import QUANTITY_POWER, ZETA_BOUNDS
+from vibinverse.oma.band_model import QUANTITY_POWER, ZETA_BOUNDS, quantity_of
+from vibinverse.oma.peaks import MAX_BANDS, MAX_MODES_PER_BAND, Peak, group_bands, pick_peaks
 from vibinverse.oma.result import INTERVAL, BandFit, OmaMode, OmaResult, signed_unit
 from vibinverse.oma.spectral_matrix import SingularValues, detrended, step_of
 
 log = logging.getLogger(__name__)
 
 DRAWS = 2000
-MAX_MODES_PER_BAND = 3
 MIN_COHERENCE = 0.5
 #: an FRF with a coherent input is smooth: a peak half the height of a response spectrum's counts
 FRF_PROMINENCE = 0.5  # a band's ordinates where the input drives the responses (median coherence)
@@ -57,6 +57,7 @@ class IOBand:
     def __init__(self, freqs: np.ndarray, y: np.ndarray, force: np.ndarray, power: int):
         self.freqs, self.y, self.force, self.power = freqs, y, force, power
         self.residual = np.column_stack([force, force / (2.0 * math.pi * freqs) ** 2])
+        self.yr = np.vstack([y.real, y.imag])  # the responses' real and imaginary parts, stacked
 
     def design(self, f: np.ndarray, zeta: np.ndarray) -> np.ndarray:
         """(J, 3M + 2) complex columns: h_m F (the forced response), F, F / W^2 (residuals), and per
@@ -73,7 +74,7 @@ class IOBand:
         """(coefficients (M + 2, C) real, noise n (C,), the real design's (X^T X)^-1)."""
         x = self.design(f, zeta)
         xr = np.vstack([x.real, x.imag])  # real coefficients of complex columns: stacked real system
-        yr = np.vstack([self.y.real, self.y.imag])
+        yr = self.yr
         scale = np.linalg.norm(xr, axis=0)
         scale[scale == 0] = 1.0
         coef, *_ = np.linalg.lstsq(xr / scale, yr, rcond=None)
@@ -84,14 +85,57 @@ class IOBand:
         cov = np.linalg.pinv(xtx) / np.outer(scale, scale)
         return coef, n, cov
 
+    def noise(self, f: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+        """Each channel's noise n at the least-squares coefficients (as `solve`, by a QR
+        factorization: the profile's inner call)."""
+        x = self.design(f, zeta)
+        xr = np.vstack([x.real, x.imag])
+        scale = np.linalg.norm(xr, axis=0)
+        scale[scale == 0] = 1.0
+        q, _ = np.linalg.qr(xr / scale)
+        resid = self.yr - q @ (q.T @ self.yr)
+        return np.maximum((resid**2).sum(axis=0) / self.freqs.size, 1e-300)
+
+    def shortfall(self, f: np.ndarray, zeta: np.ndarray) -> float:
+        """Where the fit with modes (f, zeta) falls shortest: the peak of sum_c |residual_jc|^2 / n_c
+        (smoothed over 5 ordinates) at least 2 ordinates from those modes: a start for one more."""
+        x = self.design(f, zeta)
+        coef, n, _ = self.solve(f, zeta)
+        resid = self.y - x @ coef
+        ratio = (np.abs(resid) ** 2 / n).sum(axis=1)
+        smooth = np.convolve(ratio, np.ones(5) / 5.0, "same") if ratio.size >= 5 else ratio
+        df = self.freqs[1] - self.freqs[0] if self.freqs.size > 1 else 0.0
+        for j in np.argsort(smooth)[::-1]:
+            if np.all(np.abs(self.freqs[j] - f) > 2 * df):
+                return float(self.freqs[j])
+        return float(self.freqs[int(np.argmax(smooth))])
+
+    def orders(self, starts: list[tuple[float, float]], counts: list[int]) -> dict[int, tuple[np.ndarray, float]]:
+        """The fit at each mode count: from the `count` strongest starts, and from the fit one count
+        lower plus the next start (past the starts: where that fit falls shortest, `shortfall`),
+        the better of the two kept."""
+        out: dict[int, tuple[np.ndarray, float]] = {}
+        zeta0 = float(np.median([z for _, z in starts])) if starts else 0.01
+        for m in counts:
+            tries = [starts[:m]] if m <= len(starts) else []
+            if m >= 1 and m - 1 in out:
+                theta = out[m - 1][0]
+                f, zeta = np.exp(theta[: m - 1]), np.exp(theta[m - 1 :])
+                kept = list(zip(f.tolist(), zeta.tolist()))
+                nxt = starts[m - 1] if m <= len(starts) else (self.shortfall(f, zeta), zeta0)
+                tries.append([*kept, nxt])
+            fits = [self.fit(t) for t in tries]
+            if fits:
+                out[m] = max(fits, key=lambda r: r[1] if math.isfinite(r[1]) else -math.inf)
+        return out
+
     def profile(self, theta: np.ndarray) -> float:
         """ln L_p at theta = (ln f_1 .. ln f_M, ln zeta_1 .. ln zeta_M)."""
         m = theta.size // 2
         f, zeta = np.exp(theta[:m]), np.exp(theta[m:])
         if np.any(zeta < ZETA_BOUNDS[0]) or np.any(zeta > ZETA_BOUNDS[1]):
             return -math.inf
-        _, n, _ = self.solve(f, zeta)
-        return float(-self.freqs.size * np.sum(np.log(math.pi * n) + 1.0))
+        return float(-self.freqs.size * np.sum(np.log(math.pi * self.noise(f, zeta)) + 1.0))
 
     def fit(self, starts: list[tuple[float, float]]) -> tuple[np.ndarray, float]:
         """(theta at the maximum, ln L_p there) from `starts`, also from 3x their damping."""
@@ -103,7 +147,7 @@ class IOBand:
             m = len(starts)
             bounds = [(math.log(self.freqs[0]), math.log(self.freqs[-1]))] * m + [tuple(map(math.log, ZETA_BOUNDS))] * m
             res = optimize.minimize(
-                lambda t: -self.profile(t) if math.isfinite(self.profile(t)) else 1e300,
+                self._objective,
                 t0,
                 method="L-BFGS-B",
                 bounds=bounds,
@@ -113,6 +157,10 @@ class IOBand:
             if best is None or value > best[1]:
                 best = (res.x, value)
         return best
+
+    def _objective(self, theta: np.ndarray) -> float:
+        value = self.profile(theta)
+        return -value if math.isfinite(value) else 1e300
 
     def hessian(self, theta: np.ndarray) -> np.ndarray:
         """- d^2 ln L_p / d theta^2 by central differences (steps 1e-5)."""
@@ -136,16 +184,12 @@ class IOBand:
         return h
 
 
-def _frf_peaks(
-    freqs: np.ndarray, gain: np.ndarray, coherence: np.ndarray, count: int | None
-) -> list[tuple[float, float]]:
+def _frf_peaks(freqs: np.ndarray, gain: np.ndarray, coherence: np.ndarray, count: int | None) -> list[Peak]:
     """(f, zeta) starts: peaks of the FRF magnitude where the coherence is high, via the singular-value
-    peak picker (`vibinverse.oma.identify.pick_peaks`)."""
-    from vibinverse.oma.identify import pick_peaks
-
+    peak picker (`vibinverse.oma.peaks.pick_peaks`)."""
     masked = np.where(coherence >= MIN_COHERENCE, gain, np.min(gain))
     sv = SingularValues(freqs, masked[:, None], np.ones((freqs.size, 1)), 1)
-    return [(p.f, p.zeta) for p in pick_peaks(sv, 1.0 / (freqs[1] - freqs[0]), count, FRF_PROMINENCE)]
+    return pick_peaks(sv, 1.0 / (freqs[1] - freqs[0]), count, FRF_PROMINENCE)
 
 
 def identify_io(
@@ -158,14 +202,14 @@ def identify_io(
 ) -> OmaResult:
     """Modes from the responses given the one measured input (module docstring); arguments as
     `vibinverse.oma.identify.identify`."""
-    from vibinverse.oma.identify import Peak, group_bands, quantity_of
-
     t0 = time.perf_counter()
-    if len(channels.inputs) != 1:
-        raise InputError(f"inputs: input-output identification takes one measured input; given {len(channels.inputs)}")
     responses = channels.responses
     if not responses:
         raise DataError(f"channels {channels.source}: every channel is a measured input; give at least one response")
+    if len(channels.inputs) != 1:
+        raise InputError(f"inputs: input-output identification takes one measured input; given {len(channels.inputs)}")
+    if modes is not None and not 1 <= modes <= MAX_BANDS * MAX_MODES_PER_BAND:
+        raise InputError(f"modes: must be in [1, {MAX_BANDS * MAX_MODES_PER_BAND}], got {modes}")
     resp = channels.select(list(responses))
     quantity = quantity or quantity_of(resp.units)
     if quantity not in QUANTITY_POWER:
@@ -200,25 +244,26 @@ def identify_io(
     fits: list[BandFit] = []
     resolution = 1.0 / (n * dt)
     lo_q, hi_q = (1 - INTERVAL) / 2, 1 - (1 - INTERVAL) / 2
-    for lo, hi, group in group_bands([Peak(f, z, 1.0) for f, z in starts], resolution, nyq):
+    for lo, hi, group in group_bands(starts, resolution, nyq):
         sel = (freqs >= lo) & (freqs <= hi)
         if sel.sum() < 8:
             continue
         io = IOBand(freqs[sel], y[sel], force[sel], power)
-        st = [(p.f, p.zeta) for p in group]
+        st = [(p.f, p.zeta) for p in sorted(group, key=lambda p: -p.prominence)]  # the strongest first
         counts = [len(st)] if modes is not None else list(range(min(len(st) + 1, MAX_MODES_PER_BAND) + 1))
         nobs = 2 * int(sel.sum()) * y.shape[1]
         orders: dict[int, dict] = {}
         best = None
-        for m in counts:
-            s_m = st[:m] if m <= len(st) else st + [(0.5 * (lo + hi), float(np.median([z for _, z in st])))]
-            theta, ll = io.fit(s_m)
+        for m, (theta, ll) in io.orders(st, counts).items():
             if not math.isfinite(ll):
                 continue
             k = 2 * m + (3 * m + 2) * y.shape[1] + y.shape[1]
             bic = -2.0 * ll + k * math.log(nobs)
             fm, zm = np.exp(theta[:m]), np.exp(theta[m:])
-            ok = bool(np.all(zm <= 0.1)) and bool(np.all(2 * zm * fm >= resolution))
+            # broad "modes" are the FRF's shape, sub-resolution ones a spike; two modes within two
+            # ordinates are one mode split into a cancelling pair
+            apart = bool(np.all(np.diff(np.sort(fm)) > 2 * resolution))
+            ok = bool(np.all(zm <= 0.1)) and bool(np.all(2 * zm * fm >= resolution)) and apart
             orders[m] = {
                 "bic": bic,
                 "log_likelihood": ll,
@@ -289,4 +334,6 @@ def identify_io(
         seconds=time.perf_counter() - t0,
         search=(float(band[0]), float(band[1])) if band is not None else (0.0, nyq),
         notes=notes,
+        method="input-output (profile likelihood of the responses given the input, in bands) + Laplace",
+        spectrum="|H1| (frequency response magnitude over the responses)",
     )

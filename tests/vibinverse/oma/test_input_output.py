@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-from scipy import signal
 
+from forward.motion.forced_modes import forced_modes
 from vibinverse.errors import InputError
 from vibinverse.io.channels import Channels
 from vibinverse.oma import identify, mac
@@ -14,24 +14,11 @@ RESIDUES = np.array([[1.0, 0.6, -0.3], [0.4, -0.9, 0.7]])  # (modes, channels): 
 
 
 def forced_record(seed: int, fs: float = 200.0, duration: float = 120.0, noise: float = 0.05) -> Channels:
-    """Displacements of two modes driven by a measured white force, linear between its samples
-    (exact: first-order-hold discretization of each mode's receptance; a zero-order hold would delay
-    the response by half a sample against the force, which no real measurement does), plus white
-    sensor noise."""
-    rng = np.random.default_rng(seed)
-    n = int(fs * duration)
-    force = rng.normal(size=n)
-    y = np.zeros((n, RESIDUES.shape[1]))
-    for (f, zeta), a in zip(MODES, RESIDUES, strict=True):
-        w = 2 * np.pi * f
-        num, den, _ = signal.cont2discrete(([1.0], [1.0, 2 * zeta * w, w * w]), 1 / fs, method="foh")
-        q = signal.lfilter(np.ravel(num), den, force)
-        y += np.outer(q, a)
-    y += noise * y.std(axis=0) * rng.normal(size=y.shape)
+    """Displacements of two modes driven by a measured band-limited white force, plus white sensor
+    noise (`forward.motion.forced_modes`: sampled as a data-acquisition system samples)."""
+    t, force, y = forced_modes(MODES, RESIDUES, fs=fs, duration=duration, noise=noise, seed=seed)
     values = np.column_stack([force, y])
-    return Channels(
-        np.arange(n) / fs, values, ("force", "a", "b", "c"), ("N", "m", "m", "m"), "forced", inputs=("force",)
-    )
+    return Channels(t, values, ("force", "a", "b", "c"), ("N", "m", "m", "m"), "forced", inputs=("force",))
 
 
 def test_receptance_is_the_oscillators_transfer():
@@ -44,6 +31,7 @@ def test_receptance_is_the_oscillators_transfer():
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_modes_and_residue_shapes_from_a_measured_force(seed):
+    """A regression test (one data set), not calibration: that is `examples/io_calibration.py`."""
     r = identify(forced_record(seed), quantity="displacement", band=(5.0, 60.0))
     assert [round(m.frequency) for m in r.modes] == [12, 31]
     assert r.names == ("a", "b", "c")
