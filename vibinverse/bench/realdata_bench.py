@@ -331,7 +331,7 @@ def fit_channels(path: str, spec: ChannelsInput) -> dict[str, Any]:
     from vibinverse.io.channels import Channels, load_channels
     from vibinverse.oma import identify
 
-    ch = load_channels(path, inputs=spec.inputs)
+    ch = load_channels(path, channels=list(spec.channels) if spec.channels else None, inputs=spec.inputs)
     if spec.skip:
         ch = Channels(ch.time[spec.skip :], ch.values[spec.skip :], ch.names, ch.units, ch.source, inputs=ch.inputs)
     result = identify(ch, band=spec.band)
@@ -345,7 +345,7 @@ def fit_channels(path: str, spec: ChannelsInput) -> dict[str, Any]:
         "duration_s": float(ch.time[-1] - ch.time[0]),
         "n_samples": int(ch.time.size),
         "note": f"{', '.join(result.names)}: load_channels; {spec.note}",
-        "approximation": "bayesian-fft + Laplace",
+        "approximation": result.method,
     }
 
 

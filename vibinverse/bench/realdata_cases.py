@@ -124,18 +124,22 @@ SERIES_INPUTS: dict[str, SeriesInput] = {
 class ChannelsInput:
     """How a user reads a multi-channel file (`load_channels`) for `vibinverse fit TABLE`: the
     channels that are measured inputs, the leading samples to drop, the band searched (None: all),
-    and a note."""
+    a note, and the channels read (None: all)."""
 
     inputs: tuple[str, ...] = ()
     skip: int = 0
     band: tuple[float, float] | None = None
     note: str = ""
+    channels: tuple[str, ...] | None = None  # the channels read (None: all)
 
 
 #: per multi-channel case, the modal identification of all its response channels (`fit TABLE`)
 CHANNEL_INPUTS: dict[str, ChannelsInput] = {
     "footbridge_impulse_3ch": ChannelsInput(band=(5.0, 100.0), note="3 accelerometers, 5-100 Hz"),
     "slab_smartphone_walking": ChannelsInput(skip=2000, note="X, Y, Z, first 2000 samples dropped"),
+    "plate_sweep_force_acc": ChannelsInput(
+        inputs=("force",), channels=("force", "acc"), band=(50.0, 600.0), note="acc given the measured force"
+    ),
 }
 
 

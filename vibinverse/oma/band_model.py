@@ -41,6 +41,28 @@ from vibinverse.terms.resonance import Oscillator
 #: the power of W = 2 pi f by which a measured quantity's spectrum exceeds the displacement's
 QUANTITY_POWER: Mapping[str, int] = {"displacement": 0, "velocity": 1, "acceleration": 2}
 
+#: units (lower case, spaces removed) read as each measured quantity; anything else is acceleration
+#: unless the caller says otherwise
+QUANTITY_OF_UNITS = {
+    "m": "displacement",
+    "mm": "displacement",
+    "um": "displacement",
+    "µm": "displacement",
+    "in": "displacement",
+    "m/s": "velocity",
+    "mm/s": "velocity",
+    "in/s": "velocity",
+}
+
+
+def quantity_of(units: tuple[str | None, ...]) -> str:
+    """The measured quantity the channels' units say (`QUANTITY_OF_UNITS`); acceleration otherwise
+    (g, m/s^2, a logger's volts): the common OMA sensor."""
+    found = {QUANTITY_OF_UNITS.get((u or "").lower().replace(" ", "")) for u in units}
+    found.discard(None)
+    return found.pop() if len(found) == 1 else "acceleration"
+
+
 #: damping-ratio bounds of the fit (the single-series model's prior: `Oscillator.priors`)
 ZETA_BOUNDS = (1e-4, 0.9)
 

@@ -28,14 +28,14 @@ def plot_oma(result: OmaResult, path: str | Path) -> None:
             result.sv_values[:, c],
             lw=0.8 if c else 1.2,
             color=f"C{c % 10}",
-            label=f"singular value {c + 1}",
+            label=f"{result.spectrum.split(' (')[0]} {c + 1}" if result.sv_values.shape[1] > 1 else result.spectrum,
         )
     lo, hi = result.search
     if result.bands:  # the searched band, or up to a little past the last band
         hi = min(hi, 1.25 * max(b.hi for b in result.bands))
     ax.set_xlim(lo, hi)
     ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel("singular value (unit-variance channels)")
+    ax.set_ylabel(result.spectrum)
     order_ax = ax.twinx()
     for b in result.bands:
         order_ax.axvspan(b.lo, b.hi, color="0.85", alpha=0.4, lw=0)
@@ -50,7 +50,7 @@ def plot_oma(result: OmaResult, path: str | Path) -> None:
     for m in result.modes:
         ax.axvline(m.frequency, color="C3", lw=0.6, ls="--")
     ax.legend(loc="upper right", fontsize=7)
-    ax.set_title("stabilization: each band's fits over model order, on the spectral matrix's singular values")
+    ax.set_title(f"stabilization: each band's fits over model order, on the {result.spectrum.split(' (')[0]}")
 
     ax2 = fig.add_subplot(grid[1, 0])
     if n:

@@ -105,6 +105,9 @@ class OmaResult:
     seconds: float
     search: tuple[float, float] = (0.0, float("inf"))  # the band (Hz) searched for modes
     notes: list[str] = field(default_factory=list)
+    method: str = "bayesian-fft (multi-channel Whittle in bands) + Laplace"
+    #: what `sv_values` is: the curves the stabilization diagram is drawn on
+    spectrum: str = "singular value (unit-variance channels)"
 
     @property
     def mac(self) -> np.ndarray:
@@ -113,7 +116,7 @@ class OmaResult:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "method": "bayesian-fft (multi-channel Whittle in bands) + Laplace",
+            "method": self.method,
             "interval": INTERVAL,
             "channels": list(self.names),
             "units": list(self.units),

@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from forward.motion.forced_modes import forced_modes
 from vibinverse.cli import main
 from vibinverse.oma import mac
 
@@ -56,6 +57,30 @@ def test_an_input_channel_is_left_out_of_the_responses(table, tmp_path, capsys):
     doc = json.loads((out / "summary.json").read_text())
     assert doc["channels"] == ["roof", "mid"] and doc["search_band"] == [0.5, 5.0]
     assert all(set(m["shape"]) == {"roof", "mid"} for m in doc["modes"])
+    assert any("input-output" in n for n in doc["notes"])
+
+
+def test_a_measured_force_gives_input_output_identification(tmp_path, capsys):
+    """`--input force` on a record of two modes driven by a measured force: both modes, their
+    residue shapes, intervals that hold them (one data set: a regression test)."""
+    modes, residues = ((12.0, 0.02), (31.0, 0.015)), np.array([[1.0, 0.6], [0.4, -0.9]])
+    t, force, y = forced_modes(modes, residues, fs=200.0, duration=60.0, seed=2)
+    p = tmp_path / "forced.csv"
+    with p.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["time", "force [N]", "a [m]", "b [m]"])
+        for row in zip(t, force, *y.T, strict=True):
+            w.writerow([f"{v:.9g}" for v in row])
+    out = tmp_path / "out"
+    code, err = _run(capsys, "fit", str(p), "--input", "force", "--band", "5:60", "--no-progress", "-o", str(out))
+    assert code == 0, err
+    doc = json.loads((out / "summary.json").read_text())
+    assert doc["channels"] == ["a", "b"] and any("input-output" in n for n in doc["notes"])
+    found = sorted(doc["modes"], key=lambda m: m["frequency"])
+    assert [round(m["frequency"]) for m in found] == [12, 31]
+    for m, (f, _), a in zip(found, modes, residues, strict=True):
+        assert m["frequency_interval"][0] - 0.01 <= f <= m["frequency_interval"][1] + 0.01
+        assert mac(np.array(list(m["shape"].values())), a) > 0.99
 
 
 def test_value_column_still_fits_one_series(table, tmp_path, capsys):

@@ -5,7 +5,7 @@ from scipy.signal import lfilter
 from vibinverse.errors import DataError, InputError
 from vibinverse.io.channels import Channels
 from vibinverse.oma import identify, mac
-from vibinverse.oma.identify import quantity_of
+from vibinverse.oma.band_model import quantity_of
 from vibinverse.oma.result import signed_unit
 
 from .conftest import modal_record
