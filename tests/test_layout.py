@@ -29,35 +29,26 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
-def _top_level_imports(name: str, path: Path) -> set[str]:
-    """Modules of this project that `name` imports at module level, `if TYPE_CHECKING:` blocks
-    included (a type-only import is still a dependency: a circle of them is a circle of the design;
-    imports inside functions run later and are not counted)."""
+def _imports(name: str, path: Path) -> set[str]:
+    """Modules of this project that `name` imports anywhere: at module level, in `if TYPE_CHECKING:`
+    blocks (a type-only import is still a dependency) and inside functions (an import deferred to
+    run time is one too: a circle of them is a circle of the design)."""
     tree = ast.parse(path.read_text())
     found: set[str] = set()
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-
-    def visit(body):
-        for node in body:
-            if isinstance(node, ast.If):
-                visit(node.body)
-                visit(node.orelse)
-            elif isinstance(node, ast.Try):
-                visit(node.body)
-            elif isinstance(node, ast.Import):
-                found.update(a.name for a in node.names)
-            elif isinstance(node, ast.ImportFrom):
-                base = node.module or ""
-                if node.level:
-                    base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + [base]).strip(".")
-                for a in node.names:
-                    found.add(f"{base}.{a.name}" if f"{base}.{a.name}" in MODULES else base)
-
-    visit(tree.body)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + [base]).strip(".")
+            for a in node.names:
+                found.add(f"{base}.{a.name}" if f"{base}.{a.name}" in MODULES else base)
     return {m for m in found if m in MODULES and m != name}
 
 
-GRAPH = {name: _top_level_imports(name, path) for name, path in MODULES.items()}
+GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
 
 
 def test_no_import_cycle():

@@ -46,14 +46,13 @@ import math
 import time
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from vibinverse.bench.robustness_cases import CASES, simulate
-from vibinverse.bench.robustness_fit import FitOutcome, Fitter, failed_outcome, quiet
+from vibinverse.bench.robustness_fit import FitOutcome, Fitter, ModalFitter
 from vibinverse.bench.robustness_oracle import oracle
 from vibinverse.bench.robustness_peers import Celerite2Fitter, SSIFitter
 
@@ -69,75 +68,6 @@ def modal_available() -> str | None:
         if importlib.util.find_spec(mod) is None:
             return f"{mod} is not there yet"
     return None
-
-
-@dataclass
-class ModalFitter:
-    """Ours: `vi.fit` with the scene-less modal model; `fixed` False chooses the order by BIC (no
-    scene), True fits the analyst's order with drift and AR(1) noise."""
-
-    method: str = "auto"
-    fixed: bool = False
-    noise: str = "ar1"
-    name: str = ""
-
-    def __post_init__(self) -> None:
-        self.name = self.name or ("ours-fixed" if self.fixed else "ours")
-
-    def fit(self, t: np.ndarray, y: np.ndarray, order: tuple[int, int] | None = None) -> FitOutcome:
-        import vibinverse as vi
-
-        t0 = time.perf_counter()
-        try:
-            series = vi.series(t, y, source="robustness bench")
-            if self.fixed:
-                k, m = order if order is not None else (1, 1)
-                scene = {"modal": {"modes": int(k), "lines": int(m), "drift": True, "noise": self.noise, "gain": False}}
-            else:
-                scene = None
-            with quiet():
-                result = vi.fit(series, scene, method=self.method)
-            out = outcome_from_summary(result.summary())
-        except Exception as exc:  # noqa: BLE001 - a failed fit is a result of the bench
-            return failed_outcome(t0, exc)
-        out.seconds = time.perf_counter() - t0
-        return out
-
-
-def outcome_from_summary(summary: dict[str, Any]) -> FitOutcome:
-    """A FitOutcome from a modal fit's summary: `modes[i].*`, `lines[j].*`, their q05/q95, and the
-    detection tests `mode_{i}_detected`, `line_{j}_detected` of the diagnostics (a component with
-    no test counts as claimed). Where the fit reports that a resonance's values depend on a line the
-    data cannot decide (an ambiguous reading with `intervals`), its intervals are the union of the
-    two readings': what the report tells the analyst. `posterior` is the summary's approximation
-    ("importance", "laplace"), or "emcee" where the fit has posterior draws."""
-    p = summary["parameters"]
-    diag = summary.get("diagnostics", {})
-    out = FitOutcome(posterior=str(summary.get("approximation") or "emcee"))  # no approximation: draws of emcee
-    i = 0
-    while f"modes[{i}].frequency" in p:
-        out.frequencies.append(float(p[f"modes[{i}].frequency"]["median"]))
-        out.damping_ratios.append(float(p[f"modes[{i}].damping_ratio"]["median"]))
-        out.modes_detected.append(bool(diag.get(f"mode_{i}_detected", True)))
-        i += 1
-    j = 0
-    while f"lines[{j}].frequency" in p:
-        out.line_frequencies.append(float(p[f"lines[{j}].frequency"]["median"]))
-        out.line_amplitudes.append(float(p[f"lines[{j}].amplitude"]["median"]))
-        out.lines_detected.append(bool(diag.get(f"line_{j}_detected", True)))
-        j += 1
-    for name, entry in p.items():
-        if name.startswith(("modes[", "lines[")) and entry.get("q05") is not None and entry.get("q95") is not None:
-            out.intervals[name] = (float(entry["q05"]), float(entry["q95"]))
-    for reading in diag.get("ambiguous") or []:  # a resonance's values that depend on an undecided line
-        for name, (lo, hi) in (reading.get("intervals") or {}).items():
-            if name.startswith("modes[") and name in out.intervals:
-                a, b = out.intervals[name]
-                out.intervals[name] = (min(a, float(lo)), max(b, float(hi)))
-    return out
-
-
-# ------------------------------------------------------------------ which fitters can run
 
 
 FITTERS = ("ours", "ours-fixed", "celerite2", "celerite2-ou", "ssi-cov")

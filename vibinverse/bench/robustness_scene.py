@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from vibinverse.bench import robustness_cases as rc
-from vibinverse.bench.robustness_fit import failed_outcome, quiet
+from vibinverse.bench.robustness_fit import ModalFitter, failed_outcome, quiet
 from vibinverse.errors import Interrupted
 
 LOG = logging.getLogger(__name__).info
@@ -351,7 +351,7 @@ def scene_outcome(summary: dict[str, Any]) -> SceneOutcome:
 
 @dataclass
 class ModalSceneFitter:
-    """Ours without the scene (`robustness_bench.ModalFitter`, order by BIC): the tilt is the mode
+    """Ours without the scene (`robustness_fit.ModalFitter`, order by BIC): the tilt is the mode
     nearest TILT_HZ, the drive the line nearest DRIVE_HZ (frequency only: its amplitude is in
     intensity units)."""
 
@@ -359,8 +359,6 @@ class ModalSceneFitter:
     name: str = "ours"
 
     def fit(self, t: np.ndarray, y: np.ndarray) -> SceneOutcome:
-        from vibinverse.bench.robustness_bench import ModalFitter
-
         o = ModalFitter(method=self.method).fit(t, y)
         if o.failed and o.note.startswith(f"{Interrupted.__name__}:"):  # ModalFitter records it as a failed fit
             raise Interrupted(o.note)

@@ -15,22 +15,33 @@ forms it (a test checks the two posteriors agree to 1e-9).
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
 import casadi as ca
 import numpy as np
 
 from forward.reduce import modal_points, taylor_coefficients
 from vibinverse.errors import Unsupported
-from vibinverse.models.deterministic import DeterministicModel, Line
 from vibinverse.posterior import Posterior
 from vibinverse.priors import casadi_log_prior, casadi_value
+
+
+class Line(Protocol):
+    """A vibration line's parameter names (`vibinverse.models.deterministic.Line`)."""
+
+    surface: str
+    frequency: str
+    amplitude: str
+    phase: str
+
+    def names(self) -> tuple[str, str, str]: ...
 
 
 class CasadiResponseObjective:
     """-log posterior of a deterministic-scene Posterior as a casadi Function of z, y, mask."""
 
     def __init__(self, problem: Posterior):
-        like: DeterministicModel = problem.model
+        like = problem.model  # a DeterministicModel (`vibinverse.models.deterministic`)
         self.problem, self.like = problem, like
         if like.reduction != "taylor2":
             raise Unsupported("the mean needs the compiled (Chebyshev) model")

@@ -139,20 +139,20 @@ def test_outcome_from_a_modal_summary():
         },
         "diagnostics": {"mode_0_detected": True, "mode_1_detected": False, "line_0_detected": True},
     }
-    o = rb.outcome_from_summary(summary)
+    o = rf.outcome_from_summary(summary)
     assert o.frequencies == [3.4, 5.0] and o.damping_ratios == [0.01, 0.1]
     assert o.modes_detected == [True, False] and o.lines_detected == [True]
     assert o.line_frequencies == [10.0] and o.line_amplitudes == [0.15]
     assert o.intervals["modes[0].frequency"] == (3.3, 3.5) and "modes[1].frequency" not in o.intervals
     assert "noise.sigma" not in o.intervals
     assert o.posterior == "emcee"  # no approximation named: the intervals are of emcee's draws
-    assert rb.outcome_from_summary({**summary, "approximation": "importance"}).posterior == "importance"
+    assert rf.outcome_from_summary({**summary, "approximation": "importance"}).posterior == "importance"
     # a resonance whose values depend on an undecided line: the union of the two readings' intervals
     summary["diagnostics"]["ambiguous"] = [
         {"alternative": "a line", "intervals": {"modes[0].frequency": [3.2, 3.45], "lines[1].frequency": [4, 4.1]}},
         {"alternative": "a resonance read as a line"},  # no intervals: nothing to add
     ]
-    o = rb.outcome_from_summary(summary)
+    o = rf.outcome_from_summary(summary)
     assert o.intervals["modes[0].frequency"] == (3.2, 3.5) and o.intervals["modes[0].damping_ratio"] == (0.005, 0.02)
     assert "lines[1].frequency" not in o.intervals  # another reading's line: not this fit's
 
