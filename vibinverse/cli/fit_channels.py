@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import csv
 import logging
+import math
 from pathlib import Path
 from typing import Any
 
@@ -172,4 +173,5 @@ def _write_modes(path: Path, result: Any) -> None:
             row += [*m.damping_ratio_interval, m.damping_ratio_sd]
             for c in range(len(result.names)):
                 row += [m.shape[c], *m.shape_interval[c]]
-            w.writerow([f"{v:.10g}" if isinstance(v, float) else v for v in row])
+            # an interval not computed (the posterior not locally Gaussian) is an empty cell
+            w.writerow([("" if math.isnan(v) else f"{v:.10g}") if isinstance(v, float) else v for v in row])

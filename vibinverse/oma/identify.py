@@ -293,22 +293,21 @@ def _modes_of(fitter: _BandFitter, lik: BandLikelihood, x: np.ndarray, rng: np.r
         ud *= sign
         peak = s[k] * modal_density(f[k], zeta[k], np.array([f[k]]), lik.power)[0] * float(v[k] @ v[k])
         mode_warn = list(warn)
-        modes.append(
-            OmaMode(
-                frequency=float(f[k]),
-                damping_ratio=float(zeta[k]),
-                shape=shape,
-                frequency_interval=(float(np.quantile(fd, lo_q)), float(np.quantile(fd, hi_q))),
-                damping_ratio_interval=(float(np.quantile(zd, lo_q)), float(np.quantile(zd, hi_q))),
-                shape_interval=np.quantile(ud, [lo_q, hi_q], axis=0).T,
-                frequency_sd=float(np.std(fd)),
-                damping_ratio_sd=float(np.std(zd)),
-                shape_sd=np.std(ud, axis=0),
-                band=(fitter.lo, fitter.hi),
-                level=float(2.0 * peak),
-                warnings=mode_warn,
-            )
+        mode = OmaMode(
+            frequency=float(f[k]),
+            damping_ratio=float(zeta[k]),
+            shape=shape,
+            frequency_interval=(float(np.quantile(fd, lo_q)), float(np.quantile(fd, hi_q))),
+            damping_ratio_interval=(float(np.quantile(zd, lo_q)), float(np.quantile(zd, hi_q))),
+            shape_interval=np.quantile(ud, [lo_q, hi_q], axis=0).T,
+            frequency_sd=float(np.std(fd)),
+            damping_ratio_sd=float(np.std(zd)),
+            shape_sd=np.std(ud, axis=0),
+            band=(fitter.lo, fitter.hi),
+            level=float(2.0 * peak),
+            warnings=mode_warn,
         )
+        modes.append(mode if ok else mode.without_interval())
     return modes
 
 

@@ -301,22 +301,21 @@ def identify_io(
             ref = int(np.argmax(np.abs(a)))
             ud = ad / np.linalg.norm(ad, axis=1, keepdims=True)
             ud *= np.sign(ud[:, ref] * shape[ref])[:, None]
-            found.append(
-                OmaMode(
-                    frequency=float(f[k]),
-                    damping_ratio=float(zeta[k]),
-                    shape=shape,
-                    frequency_interval=(float(np.quantile(fd, lo_q)), float(np.quantile(fd, hi_q))),
-                    damping_ratio_interval=(float(np.quantile(zd, lo_q)), float(np.quantile(zd, hi_q))),
-                    shape_interval=np.quantile(ud, [lo_q, hi_q], axis=0).T,
-                    frequency_sd=float(np.std(fd)),
-                    damping_ratio_sd=float(np.std(zd)),
-                    shape_sd=np.std(ud, axis=0),
-                    band=(float(lo), float(hi)),
-                    level=float(np.linalg.norm(a)),
-                    warnings=list(warn),
-                )
+            mode = OmaMode(
+                frequency=float(f[k]),
+                damping_ratio=float(zeta[k]),
+                shape=shape,
+                frequency_interval=(float(np.quantile(fd, lo_q)), float(np.quantile(fd, hi_q))),
+                damping_ratio_interval=(float(np.quantile(zd, lo_q)), float(np.quantile(zd, hi_q))),
+                shape_interval=np.quantile(ud, [lo_q, hi_q], axis=0).T,
+                frequency_sd=float(np.std(fd)),
+                damping_ratio_sd=float(np.std(zd)),
+                shape_sd=np.std(ud, axis=0),
+                band=(float(lo), float(hi)),
+                level=float(np.linalg.norm(a)),
+                warnings=list(warn),
             )
+            found.append(mode if good else mode.without_interval())
     found.sort(key=lambda m: m.frequency)
     notes.append(f"input-output: the responses fitted given the measured input {channels.inputs[0]}")
     if not found:

@@ -10,7 +10,7 @@ import html
 import io
 from pathlib import Path
 
-from vibinverse.oma.result import INTERVAL, OmaResult
+from vibinverse.oma.result import INTERVAL, OmaResult, interval_text
 from vibinverse.report import CSS
 
 
@@ -39,9 +39,9 @@ def oma_html(result: OmaResult, source: str) -> str:
     for i, m in enumerate(result.modes, 1):
         warn = "<br>".join(_e(w) for w in m.warnings)
         rows.append(
-            f"<tr><td>{i}</td><td>{m.frequency:.6g}</td><td>[{m.frequency_interval[0]:.6g}, "
-            f"{m.frequency_interval[1]:.6g}]</td><td>{m.damping_ratio:.4g}</td><td>[{m.damping_ratio_interval[0]:.4g}, "
-            f"{m.damping_ratio_interval[1]:.4g}]</td><td>{warn}</td></tr>"
+            f"<tr><td>{i}</td><td>{m.frequency:.6g}</td><td>{interval_text(*m.frequency_interval, '.6g')}</td>"
+            f"<td>{m.damping_ratio:.4g}</td><td>{interval_text(*m.damping_ratio_interval, '.4g')}</td>"
+            f"<td>{warn}</td></tr>"
         )
     modes = (
         f"<table><thead><tr><th>mode</th><th>f (Hz)</th><th>{p} %</th><th>ζ</th><th>{p} %</th><th>warnings</th></tr>"
@@ -51,8 +51,7 @@ def oma_html(result: OmaResult, source: str) -> str:
     shape_rows = []
     for c, name in enumerate(result.names):
         cells = "".join(
-            f"<td>{m.shape[c]:+.3f} [{m.shape_interval[c, 0]:+.3f}, {m.shape_interval[c, 1]:+.3f}]</td>"
-            for m in result.modes
+            f"<td>{m.shape[c]:+.3f} {interval_text(*m.shape_interval[c], '+.3f')}</td>" for m in result.modes
         )
         shape_rows.append(f"<tr><th>{_e(name)}</th>{cells}</tr>")
     shapes = f"<table><thead><tr><th>channel</th>{shape_head}</tr></thead><tbody>{''.join(shape_rows)}</tbody></table>"

@@ -4,7 +4,8 @@ model order (the stabilization-style view) and the singular-value spectrum behin
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -34,6 +35,16 @@ def signed_unit(v: np.ndarray) -> np.ndarray:
     return u if u[int(np.argmax(np.abs(u)))] >= 0 else -u
 
 
+def _number(v: float) -> float | None:
+    """A finite float, or None (JSON null) for NaN: a value that was not computed."""
+    return float(v) if math.isfinite(v) else None
+
+
+def interval_text(lo: float, hi: float, fmt: str) -> str:
+    """'[lo, hi]' in `fmt`, or 'no interval' where it was not computed (NaN)."""
+    return f"[{lo:{fmt}}, {hi:{fmt}}]" if math.isfinite(lo) and math.isfinite(hi) else "no interval"
+
+
 @dataclass
 class OmaMode:
     """One identified mode: MAP values, 90 % intervals and standard deviations of the frequency
@@ -52,17 +63,38 @@ class OmaMode:
     level: float  # the modal response's peak spectral density on the unit shape (units^2 / Hz, one-sided)
     warnings: list[str] = field(default_factory=list)
 
+    @property
+    def has_interval(self) -> bool:
+        """False where the posterior was not locally Gaussian: no interval is claimed (NaN)."""
+        return bool(np.all(np.isfinite(self.frequency_interval)))
+
+    def without_interval(self) -> OmaMode:
+        """This mode with its intervals and sds NaN: what the data gave no interval for."""
+        nan = (math.nan, math.nan)
+        return replace(
+            self,
+            frequency_interval=nan,
+            damping_ratio_interval=nan,
+            shape_interval=np.full_like(self.shape_interval, math.nan),
+            frequency_sd=math.nan,
+            damping_ratio_sd=math.nan,
+            shape_sd=np.full_like(self.shape_sd, math.nan),
+        )
+
     def to_json(self, names: tuple[str, ...]) -> dict[str, Any]:
+        """JSON-able; an interval or sd that was not computed is null."""
         return {
             "frequency": self.frequency,
-            "frequency_interval": list(self.frequency_interval),
-            "frequency_sd": self.frequency_sd,
+            "frequency_interval": [_number(v) for v in self.frequency_interval],
+            "frequency_sd": _number(self.frequency_sd),
             "damping_ratio": self.damping_ratio,
-            "damping_ratio_interval": list(self.damping_ratio_interval),
-            "damping_ratio_sd": self.damping_ratio_sd,
+            "damping_ratio_interval": [_number(v) for v in self.damping_ratio_interval],
+            "damping_ratio_sd": _number(self.damping_ratio_sd),
             "shape": {n: float(v) for n, v in zip(names, self.shape, strict=True)},
-            "shape_interval": {n: [float(a), float(b)] for n, (a, b) in zip(names, self.shape_interval, strict=True)},
-            "shape_sd": {n: float(v) for n, v in zip(names, self.shape_sd, strict=True)},
+            "shape_interval": {
+                n: [_number(a), _number(b)] for n, (a, b) in zip(names, self.shape_interval, strict=True)
+            },
+            "shape_sd": {n: _number(v) for n, v in zip(names, self.shape_sd, strict=True)},
             "band": list(self.band),
             "peak_density": self.level,
             "warnings": list(self.warnings),
@@ -138,15 +170,13 @@ class OmaResult:
             f"{len(self.modes)} mode(s) from {len(self.names)} channel(s) ({', '.join(self.names)}); {p} % intervals"
         ]
         for i, m in enumerate(self.modes):
-            flo, fhi = m.frequency_interval
-            zlo, zhi = m.damping_ratio_interval
             shape = "  ".join(
-                f"{n}={v:+.3f}[{a:+.3f},{b:+.3f}]"
+                f"{n}={v:+.3f}" + (f"[{a:+.3f},{b:+.3f}]" if math.isfinite(a) else " (no interval)")
                 for n, v, (a, b) in zip(self.names, m.shape, m.shape_interval, strict=True)
             )
             lines.append(
-                f"mode {i + 1}: f = {m.frequency:.5g} Hz [{flo:.5g}, {fhi:.5g}]  zeta = {m.damping_ratio:.4f} "
-                f"[{zlo:.4f}, {zhi:.4f}]  shape: {shape}"
+                f"mode {i + 1}: f = {m.frequency:.5g} Hz {interval_text(*m.frequency_interval, '.5g')}  "
+                f"zeta = {m.damping_ratio:.4f} {interval_text(*m.damping_ratio_interval, '.4f')}  shape: {shape}"
             )
             lines += [f"  warning: {w}" for w in m.warnings]
         lines += [f"note: {n}" for n in self.notes]
