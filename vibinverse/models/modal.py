@@ -103,7 +103,7 @@ from vibinverse.priors import Prior
 from vibinverse.terms.base import INTEGRATED_WALK_FORM, OSCILLATOR_FORM, WALK_FORM, DataFacts, Term
 from vibinverse.terms.drift import GAIN_LIMIT, GAIN_TERMS, gain_basis, gain_names
 from vibinverse.terms.noise import flicker_terms
-from vibinverse.terms.nuisance import DRIFT_KINDS, DRIFT_TERMS, NOISE_KINDS, NOISE_TERMS
+from vibinverse.terms.nuisance import DRIFT_KINDS, DRIFT_TERMS, NOISE_KINDS, NOISE_TERMS, NuisanceKinds
 from vibinverse.terms.resonance import Oscillator
 
 #: records at least this long, uniform, without gaps or a gain drift, are fitted by Whittle's
@@ -117,7 +117,7 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 
 @dataclass(frozen=True)
-class ModalSpec:
+class ModalSpec(NuisanceKinds):
     """The model's order: K modes, L lines, the drift ("none", "walk", "integrated"), the
     coloured noise ("white", "ar1", "1/f"), the gain drift's number of cosines (0: none), and
     whether the white sensor noise is there (`white`; False only beside a coloured noise, which
@@ -133,16 +133,6 @@ class ModalSpec:
     def __post_init__(self) -> None:
         if not self.white and not self.coloured:
             raise SceneError("modal.white: false needs a coloured noise (noise = 'ar1' or '1/f') in its place")
-
-    @property
-    def coloured(self) -> bool:
-        """Whether a coloured noise (AR(1), 1/f) is there."""
-        return NOISE_TERMS[self.noise] is not None
-
-    @property
-    def drifting(self) -> bool:
-        """Whether an additive drift is there."""
-        return DRIFT_TERMS[self.drift] is not None
 
     def nuisance_terms(self) -> list[Term]:
         """The drift's and the coloured noise's terms, those there (`DRIFT_TERMS`, `NOISE_TERMS`)."""

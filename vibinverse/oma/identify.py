@@ -50,7 +50,7 @@ from vibinverse.oma.peaks import (
     group_bands,
     pick_peaks,
 )
-from vibinverse.oma.result import INTERVAL, BandFit, OmaMode, OmaResult, signed_unit
+from vibinverse.oma.result import BandFit, OmaMode, OmaResult, mode_from_draws, signed_unit
 from vibinverse.oma.spectral_matrix import Ordinates, SingularValues, ordinates, singular_values
 
 log = logging.getLogger(__name__)
@@ -280,7 +280,6 @@ def _modes_of(fitter: _BandFitter, lik: BandLikelihood, x: np.ndarray, rng: np.r
     else:
         warn.append("the posterior is not locally Gaussian at the MAP (Hessian not positive definite): no interval")
         draws = x[None, :]
-    lo_q, hi_q = (1 - INTERVAL) / 2, 1 - (1 - INTERVAL) / 2
     modes = []
     for k in range(lay.modes):
         fd = np.exp(draws[:, k])
@@ -293,21 +292,9 @@ def _modes_of(fitter: _BandFitter, lik: BandLikelihood, x: np.ndarray, rng: np.r
         ud *= sign
         peak = s[k] * modal_density(f[k], zeta[k], np.array([f[k]]), lik.power)[0] * float(v[k] @ v[k])
         mode_warn = list(warn)
-        mode = OmaMode(
-            frequency=float(f[k]),
-            damping_ratio=float(zeta[k]),
-            shape=shape,
-            frequency_interval=(float(np.quantile(fd, lo_q)), float(np.quantile(fd, hi_q))),
-            damping_ratio_interval=(float(np.quantile(zd, lo_q)), float(np.quantile(zd, hi_q))),
-            shape_interval=np.quantile(ud, [lo_q, hi_q], axis=0).T,
-            frequency_sd=float(np.std(fd)),
-            damping_ratio_sd=float(np.std(zd)),
-            shape_sd=np.std(ud, axis=0),
-            band=(fitter.lo, fitter.hi),
-            level=float(2.0 * peak),
-            warnings=mode_warn,
+        modes.append(
+            mode_from_draws(f[k], zeta[k], shape, (fd, zd, ud), (fitter.lo, fitter.hi), 2.0 * peak, mode_warn, ok)
         )
-        modes.append(mode if ok else mode.without_interval())
     return modes
 
 

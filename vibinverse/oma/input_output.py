@@ -33,7 +33,7 @@ from vibinverse.errors import DataError, InputError
 from vibinverse.io.channels import Channels
 from vibinverse.oma.band_model import QUANTITY_POWER, ZETA_BOUNDS, quantity_of
 from vibinverse.oma.peaks import MAX_BANDS, MAX_MODES_PER_BAND, Peak, group_bands, pick_peaks
-from vibinverse.oma.result import INTERVAL, BandFit, OmaMode, OmaResult, signed_unit
+from vibinverse.oma.result import BandFit, OmaMode, OmaResult, mode_from_draws, signed_unit
 from vibinverse.oma.spectral_matrix import SingularValues, detrended, step_of
 
 log = logging.getLogger(__name__)
@@ -243,7 +243,6 @@ def identify_io(
     found: list[OmaMode] = []
     fits: list[BandFit] = []
     resolution = 1.0 / (n * dt)
-    lo_q, hi_q = (1 - INTERVAL) / 2, 1 - (1 - INTERVAL) / 2
     for lo, hi, group in group_bands(starts, resolution, nyq):
         sel = (freqs >= lo) & (freqs <= hi)
         if sel.sum() < 8:
@@ -301,21 +300,9 @@ def identify_io(
             ref = int(np.argmax(np.abs(a)))
             ud = ad / np.linalg.norm(ad, axis=1, keepdims=True)
             ud *= np.sign(ud[:, ref] * shape[ref])[:, None]
-            mode = OmaMode(
-                frequency=float(f[k]),
-                damping_ratio=float(zeta[k]),
-                shape=shape,
-                frequency_interval=(float(np.quantile(fd, lo_q)), float(np.quantile(fd, hi_q))),
-                damping_ratio_interval=(float(np.quantile(zd, lo_q)), float(np.quantile(zd, hi_q))),
-                shape_interval=np.quantile(ud, [lo_q, hi_q], axis=0).T,
-                frequency_sd=float(np.std(fd)),
-                damping_ratio_sd=float(np.std(zd)),
-                shape_sd=np.std(ud, axis=0),
-                band=(float(lo), float(hi)),
-                level=float(np.linalg.norm(a)),
-                warnings=list(warn),
+            found.append(
+                mode_from_draws(f[k], zeta[k], shape, (fd, zd, ud), (lo, hi), float(np.linalg.norm(a)), warn, good)
             )
-            found.append(mode if good else mode.without_interval())
     found.sort(key=lambda m: m.frequency)
     notes.append(f"input-output: the responses fitted given the measured input {channels.inputs[0]}")
     if not found:

@@ -101,6 +101,38 @@ class OmaMode:
         }
 
 
+def mode_from_draws(
+    f: float,
+    zeta: float,
+    shape: np.ndarray,
+    draws: tuple[np.ndarray, np.ndarray, np.ndarray],
+    band: tuple[float, float],
+    level: float,
+    warnings: list[str],
+    gaussian: bool,
+) -> OmaMode:
+    """A mode from its MAP values and posterior draws (f, zeta, unit shapes (draws, channels)):
+    central INTERVAL quantiles and sds; without an interval (NaN) when the posterior was not
+    locally Gaussian (`gaussian` False)."""
+    fd, zd, ud = draws
+    lo_q, hi_q = (1 - INTERVAL) / 2, 1 - (1 - INTERVAL) / 2
+    mode = OmaMode(
+        frequency=float(f),
+        damping_ratio=float(zeta),
+        shape=shape,
+        frequency_interval=(float(np.quantile(fd, lo_q)), float(np.quantile(fd, hi_q))),
+        damping_ratio_interval=(float(np.quantile(zd, lo_q)), float(np.quantile(zd, hi_q))),
+        shape_interval=np.quantile(ud, [lo_q, hi_q], axis=0).T,
+        frequency_sd=float(np.std(fd)),
+        damping_ratio_sd=float(np.std(zd)),
+        shape_sd=np.std(ud, axis=0),
+        band=(float(band[0]), float(band[1])),
+        level=float(level),
+        warnings=list(warnings),
+    )
+    return mode if gaussian else mode.without_interval()
+
+
 @dataclass
 class BandFit:
     """One band's fits over model order: for each mode count, (BIC, ln L, frequencies, damping

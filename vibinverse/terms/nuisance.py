@@ -31,8 +31,27 @@ SPEC_KEYS = ("noise", "drift", "gain", "white")  # what a spec holds (the search
 KEYS = (*SPEC_KEYS, "values", "start")
 
 
+class NuisanceKinds:
+    """What a spec's `noise` and `drift` spellings say, through the registries (`NOISE_TERMS`,
+    `DRIFT_TERMS`): a base of every spec that holds them (`NuisanceSpec`, the modal model's
+    `ModalSpec`)."""
+
+    noise: str
+    drift: str
+
+    @property
+    def coloured(self) -> bool:
+        """Whether a coloured noise (AR(1), 1/f) is there."""
+        return NOISE_TERMS[self.noise] is not None
+
+    @property
+    def drifting(self) -> bool:
+        """Whether an additive drift is there."""
+        return DRIFT_TERMS[self.drift] is not None
+
+
 @dataclass(frozen=True)
-class NuisanceSpec:
+class NuisanceSpec(NuisanceKinds):
     """Which nuisance terms: the coloured noise ("white": none, "ar1", "1/f"), the drift ("none",
     "walk", "integrated"), the gain drift's cosines (0: none) and the white sensor noise (False only
     beside a coloured noise, which then is the whole noise)."""
@@ -73,16 +92,6 @@ class NuisanceSpec:
         if not isinstance(white, (bool, np.bool_)):
             raise SceneError(f"{key}.white: {white!r}; allowed: true, or false beside noise = 'ar1' or '1/f'")
         return cls(noise, drift, int(gain), bool(white))
-
-    @property
-    def coloured(self) -> bool:
-        """Whether a coloured noise (AR(1), 1/f) is there."""
-        return NOISE_TERMS[self.noise] is not None
-
-    @property
-    def drifting(self) -> bool:
-        """Whether an additive drift is there."""
-        return DRIFT_TERMS[self.drift] is not None
 
     def table(self) -> dict[str, Any]:
         """The `nuisance` sub-table of this spec."""
