@@ -97,7 +97,7 @@ class Case:
     references: tuple[Reference, ...]
     tolerance_hz: float | None
     notes: str = ""
-    expected_failure: str = ""  # why the tool is not expected to find the references ("" when it is)
+    expected_failure: str = ""  # why a single-series fit is not expected to find the references ("" when it is)
 
     def scored(self, file: CaseFile) -> list[Reference]:
         """The references that count for `file` (found or missed)."""
