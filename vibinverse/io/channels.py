@@ -118,6 +118,10 @@ class Channels:
             raise InputError(f"channels: no channel {name!r}; allowed: {', '.join(self.names)}")
         return self.names.index(name)
 
+    def rows(self, start: int, stop: int) -> Channels:
+        """Samples start .. stop - 1 of every channel (names, units, positions and inputs kept)."""
+        return replace(self, time=self.time[start:stop], values=self.values[start:stop], notes=list(self.notes))
+
     def select(self, names: list[str] | tuple[str, ...]) -> Channels:
         """These channels, in this order (their positions and input flags kept)."""
         if not names:

@@ -184,6 +184,39 @@ class IOBand:
         return h
 
 
+#: the least part of the record the input's longest stretch without gaps must hold
+MIN_INPUT_STRETCH = 0.5
+
+
+def _gap_free_input(channels: Channels) -> tuple[Channels, list[str]]:
+    """The record cut to the input's longest stretch without missing values, and a note (none when
+    it has none): a response is the structure's answer to the input at every instant, so a gap in
+    the input cannot be filled (zeros would be a force that was not there). DataError when that
+    stretch is under MIN_INPUT_STRETCH of the record."""
+    good = np.isfinite(channels.values[:, channels.index(channels.inputs[0])])
+    if good.all():
+        return channels, []
+    edges = np.flatnonzero(np.diff(np.r_[0, good.astype(np.int8), 0]))
+    starts, stops = edges[::2], edges[1::2]
+    if starts.size == 0:
+        raise DataError(f"channels {channels.source}: the input {channels.inputs[0]} has no values")
+    k = int(np.argmax(stops - starts))
+    a, b = int(starts[k]), int(stops[k])
+    n = good.size
+    if b - a < MIN_INPUT_STRETCH * n:
+        raise DataError(
+            f"channels {channels.source}: the input {channels.inputs[0]} has {int((~good).sum())} missing values and "
+            f"its longest stretch without them is {b - a} of {n} samples; input-output identification needs a "
+            f"stretch of at least {MIN_INPUT_STRETCH:.0%} of the record"
+        )
+    cut = channels.rows(a, b)
+    note = (
+        f"the input {channels.inputs[0]} has {int((~good).sum())} missing values: fitted on its longest stretch "
+        f"without them, {cut.time[0]:.6g}-{cut.time[-1]:.6g} s ({(b - a) / n:.0%} of the record)"
+    )
+    return cut, [note]
+
+
 def _frf_peaks(freqs: np.ndarray, gain: np.ndarray, coherence: np.ndarray, count: int | None) -> list[Peak]:
     """(f, zeta) starts: peaks of the FRF magnitude where the coherence is high, via the singular-value
     peak picker (`vibinverse.oma.peaks.pick_peaks`)."""
@@ -215,7 +248,9 @@ def identify_io(
     if quantity not in QUANTITY_POWER:
         raise InputError(f"quantity: {quantity!r} is not one of {', '.join(QUANTITY_POWER)}")
     power = QUANTITY_POWER[quantity]
+    channels, cut = _gap_free_input(channels)
     dt, notes = step_of(channels)
+    notes += cut
     both = channels.select([channels.inputs[0], *responses])
     v, gap_notes = detrended(both)
     notes = notes + gap_notes

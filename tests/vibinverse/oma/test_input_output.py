@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from forward.motion.forced_modes import forced_modes
-from vibinverse.errors import InputError
+from vibinverse.errors import DataError, InputError
 from vibinverse.io.channels import Channels
 from vibinverse.oma import identify, mac
 from vibinverse.oma.input_output import receptance
@@ -48,3 +48,28 @@ def test_two_inputs_are_refused_in_one_line():
     with pytest.raises(InputError) as e:
         identify(two)
     assert "one measured input" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_gap_in_the_input_is_cut_out_not_filled():
+    """A gap in the measured force: the fit runs on its longest stretch without one (noted), and
+    finds the modes as the whole record does; a force with gaps everywhere is refused in one line."""
+    ch = forced_record(4, duration=60.0)
+    v = ch.values.copy()
+    v[600:640, 0] = np.nan  # 0.2 s of the force lost at 3 s
+    r = identify(Channels(ch.time, v, ch.names, ch.units, "gap", inputs=("force",)), quantity="displacement")
+    assert [round(m.frequency) for m in r.modes] == [12, 31]
+    assert any("longest stretch without them" in n and "95% of the record" in n for n in r.notes)
+    v[::100, 0] = np.nan
+    with pytest.raises(DataError) as e:
+        identify(Channels(ch.time, v, ch.names, ch.units, "holes", inputs=("force",)), quantity="displacement")
+    assert "longest stretch" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_constant_channel_is_refused_in_one_line():
+    ch = forced_record(5, duration=10.0)
+    for c, name in ((0, "force"), (2, "b")):
+        v = ch.values.copy()
+        v[:, c] = 3.0
+        with pytest.raises(DataError) as e:
+            identify(Channels(ch.time, v, ch.names, ch.units, "flat", inputs=("force",)))
+        assert f"channel {name} is constant" in str(e.value) and "\n" not in str(e.value)
