@@ -86,10 +86,10 @@ def detrended(channels: Channels) -> tuple[np.ndarray, list[str]]:
             raise DataError(f"channels {channels.source}: channel {channels.names[c]} has fewer than 3 values")
         slope, icept = np.polyfit(k[g], v[g, c], 1)
         v[:, c] = np.where(g, v[:, c] - (icept + slope * k), 0.0)
-        if not np.any(np.abs(v[g, c]) > 1e-12 * max(float(np.max(np.abs(channels.values[g, c]))), 1e-300)):
+        if not np.any(np.abs(v[g, c]) > 1e-14 * max(float(np.max(np.abs(channels.values[g, c]))), 1e-300)):
             raise DataError(
                 f"channels {channels.source}: channel {channels.names[c]} is constant (or a straight line): it "
-                "carries no vibration; leave it out (--channels)"
+                "carries no signal; leave it out (--channels)"
             )
     if frac > 0:
         notes.append(f"{int((~good).sum())} missing values ({frac:.2%}) filled with zeros after de-trending")
