@@ -132,13 +132,6 @@ from vibinverse.terms.nuisance import DRIFT_TERMS, NO_DRIFT, NO_NOISE, NOISE_TER
 
 logger = logging.getLogger(__name__)
 
-#: a record longer than this many samples has its order chosen on its first ORDER_SAMPLES (the
-#: search's cost grows with the record; the MAP then starts on the same leading stretch and carries
-#: the chosen order to the whole record, `vibinverse.pipeline.stretched_map`): components too weak
-#: to earn their place in that stretch are not searched for in the rest
-ORDER_RECORD = 50_000
-ORDER_SAMPLES = 25_000
-
 MAX_MODES = 6
 MAX_LINES = 6
 REFIT_TOP = 2  # candidates refitted with every parameter free, per step
@@ -223,9 +216,6 @@ class OrderResult:
     #: the fitted order of each ambiguous reading that is a possible line next to a resonance, by its
     #: entry's "alternative" (`settle_near_lines`): the fit refits it for its intervals
     readings: dict[str, OrderFit] = field(default_factory=dict)
-    #: the samples the search ran on: the record's first ORDER_SAMPLES when it is longer than
-    #: ORDER_RECORD, else all of it (0: not said)
-    samples: int = 0
 
     @property
     def spec(self) -> ModalSpec:
@@ -972,10 +962,6 @@ def choose_order(
     `table`: a `{"modal": {...}}` table whose `modes`, `lines`, `drift`, `noise` are fixed (not
     searched); None searches all. Returns the chosen fit and the criterion table."""
     t0 = time.perf_counter()
-    whole = series.time.size
-    if whole > ORDER_RECORD:
-        series = series.head(ORDER_SAMPLES)
-        logger.info("model order: chosen on the record's first %d of %d samples", ORDER_SAMPLES, whole)
     fixed = dict((table or {}).get("modal") or {})
     spec = ModalSpec.from_table({"modal": {k: fixed[k] for k in (*SEARCHED, "white") if k in fixed}})
     search = {k: k not in fixed for k in SEARCHED}
@@ -985,8 +971,7 @@ def choose_order(
         # a gain drift's likelihood needs the Kalman filter: minutes per fit on a record this long
         search["gain"] = False
         logger.info("model order: a gain drift is not searched on a long record (give `gain` to fit one)")
-    where = f" (on the first {series.time.size} of {whole} samples)" if whole > series.time.size else ""
-    rows: list[dict[str, Any]] = [_row(0, "start: " + _describe(spec) + where, current, None, "full", True)]
+    rows: list[dict[str, Any]] = [_row(0, "start: " + _describe(spec), current, None, "full", True)]
     logger.info("model order: %s, BIC %.1f", _describe(spec), current.bic)
     ambiguous: list[dict[str, Any]] = []
     readings: dict[str, OrderFit] = {}
@@ -1013,7 +998,7 @@ def choose_order(
         if final:
             break
         step += 1
-    return OrderResult(current, rows, time.perf_counter() - t0, ambiguous, readings, series.time.size)
+    return OrderResult(current, rows, time.perf_counter() - t0, ambiguous, readings)
 
 
 def fit_fixed(series: Series, spec: ModalSpec) -> OrderFit:

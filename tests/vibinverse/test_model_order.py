@@ -101,26 +101,6 @@ def test_a_line_and_a_mode_are_found_as_a_line_and_a_mode():
     assert line["amplitude"] == pytest.approx(0.15, rel=0.2) and line["harmonic_of"] is None
 
 
-def test_a_long_record_has_its_order_chosen_on_its_leading_stretch(monkeypatch):
-    """Past ORDER_RECORD samples the search runs on the first ORDER_SAMPLES (said in its first
-    row and `samples`), and `vi.fit` carries that order to the whole record."""
-    from vibinverse import model_order
-
-    monkeypatch.setattr(model_order, "ORDER_RECORD", 2500)
-    monkeypatch.setattr(model_order, "ORDER_SAMPLES", 1500)
-    t, y = simulate(3000, modes=[(2.3, 0.02, 0.6)], sigma=0.5, lines=[(5.1, 0.15, 0.7)], seed=0)
-    res = choose_order(vi.series(t, y))
-    assert res.samples == 1500 and "(on the first 1500 of 3000 samples)" in res.criterion[0]["tried"]
-    assert (res.spec.modes, res.spec.lines) == (1, 1)
-    short = choose_order(vi.series(t[:2000], y[:2000]))
-    assert short.samples == 2000 and "first" not in short.criterion[0]["tried"]
-    fit = vi.fit(vi.series(t, y), method="map")
-    p = fit.summary()["parameters"]
-    assert fit.diagnostics["model_order"][0]["tried"].endswith("(on the first 1500 of 3000 samples)")
-    assert p["modes[0].frequency"]["q05"] < 2.3 < p["modes[0].frequency"]["q95"]
-    assert p["lines[0].frequency"]["map"] == pytest.approx(5.1, abs=2e-3)
-
-
 def test_a_harmonic_is_recorded_as_one_source():
     t, y = simulate(2000, sigma=0.5, lines=[(1.5, 0.3, 0.2), (3.0, 0.2, -1.0)], seed=2)
     res = choose_order(vi.series(t, y), {"modal": {"modes": 0, "drift": False, "noise": "white"}})
