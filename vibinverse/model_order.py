@@ -266,7 +266,9 @@ def fit_order(
     parameters not in `free` held at the start's values), in the unconstrained space of the priors
     (logit; L-BFGS-B with finite-difference gradients); the modes and lines sorted by frequency.
     `windows`: the near-line bands of the order it derives from (`OrderFit.windows`)."""
-    model = ModalModel({"modal": spec.table()}, series)
+    # the first start is the model's (`ModalModel.value`): each line's phase prior is centred on it,
+    # and no spectral guess is computed for a start that names every parameter
+    model = ModalModel({"modal": {**spec.table(), "start": dict(starts[0]) if starts else {}}}, series)
     space = ParameterSpace(model.default_priors())
     names = space.names
     free = [n for n in names if free is None or n in free]

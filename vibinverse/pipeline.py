@@ -137,10 +137,12 @@ def fit_method(method: str) -> type[FitMethod]:
     return FIT_METHODS[method]
 
 
-def spectral_stage(posterior: Posterior) -> FitResult:
+def spectral_stage(posterior: Posterior, final: bool = True) -> FitResult:
     """The spectral stage, every method's first; DataError when the model's observation describes
-    none of its readings (`check_observation`)."""
-    spectral = SpectralEstimator().fit(posterior)
+    none of its readings (`check_observation`). Not `final`: only the next stage's start, not
+    completed (`Estimator.timed`)."""
+    estimator = SpectralEstimator()
+    spectral = estimator.fit(posterior) if final else estimator.timed(posterior)
     check_observation(posterior, spectral)
     return spectral
 
@@ -181,11 +183,11 @@ class FitMethod(ABC):
     def to_map(self, posterior: Posterior, seed: int) -> tuple[FitResult, dict | None, dict[str, float]]:
         """(the MAP, SINDy's diagnostics or None, every stage's seconds): the spectral stage, SINDy
         when `sindy_seeds` and it covers the model, and the MAP from the last of them (`map_stage`)."""
-        spectral = spectral_stage(posterior)
+        spectral = spectral_stage(posterior, final=False)
         timing = dict(spectral.timing)
         start, sindy = spectral, None
         if self.sindy_seeds and SindyEstimator.covers(posterior):
-            stage = SindyEstimator().fit(posterior, spectral)
+            stage = SindyEstimator().timed(posterior, spectral)
             timing.update(stage.timing)
             sindy, start = stage.diagnostics["sindy"], stage
         best = map_stage(posterior, start, self, seed)

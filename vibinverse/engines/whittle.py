@@ -124,6 +124,149 @@ def line_transform(cw, sw, m, diff, theta, psi, amp, out):  # pragma: no cover -
 
 
 @njit(cache=True, fastmath=False, nogil=True)
+def block_gradient(cw, sw, c, diff, phi, q, h, o, size, slope, out):  # pragma: no cover - compiled
+    """sum_j slope_j d f_j / d e for each table entry e of the block of `size` 1 or 2 states at
+    state o (`spectral_density`'s share of it, times c(w) when diff), analytically in one pass
+    over the ordinates, into `out`: (phi, q) of a 1 x 1 block, (a11, a12, a21, a22, q11, q12, q22)
+    of a 2 x 2 one (q12 the upper entry: Q is symmetric). Its share is a rational function of
+    the entries at each ordinate: h^2 q / |z - phi|^2, or |h adj(M)|_Q^2 / |det M|^2 (M = zI - Phi)."""
+    out[:] = 0.0
+    nj = cw.shape[0]
+    if size == 1:
+        hh = h[o] * h[o]
+        if hh == 0.0:
+            return
+        p, qq = phi[o, o], q[o, o]
+        one_p = 1.0 - p
+        gp, gq = 0.0, 0.0
+        for j in range(nj):
+            den = one_p * one_p + p * c[j]  # |z - p|^2
+            if den > 0.0:
+                u = slope[j] * hh * (c[j] if diff else 1.0) / den
+                gq += u
+                gp += u * qq * (2.0 * one_p - c[j]) / den  # d den / d p = c - 2 (1 - p)
+        out[0], out[1] = gp, gq
+        return
+    h1, h2 = h[o], h[o + 1]
+    if h1 == 0.0 and h2 == 0.0:
+        return
+    a11, a12, a21, a22 = phi[o, o], phi[o, o + 1], phi[o + 1, o], phi[o + 1, o + 1]
+    q11, q12, q22 = q[o, o], q[o, o + 1], q[o + 1, o + 1]
+    g11, g12, g21, g22, gq11, gq12, gq22 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    for j in range(nj):
+        m11r, m22r, mi = cw[j] - a11, cw[j] - a22, sw[j]
+        n1r, n1i = h1 * m22r + h2 * a21, h1 * mi
+        n2r, n2i = h2 * m11r + h1 * a12, h2 * mi
+        detr = m11r * m22r - mi * mi - a12 * a21
+        deti = (m11r + m22r) * mi
+        s1, s2, s12 = n1r * n1r + n1i * n1i, n2r * n2r + n2i * n2i, n1r * n2r + n1i * n2i
+        num = q11 * s1 + q22 * s2 + 2.0 * q12 * s12
+        dd = detr * detr + deti * deti
+        inv = 1.0 / dd
+        u = slope[j] * (c[j] if diff else 1.0) * inv  # d f / d x = u (d num / d x - f d dd / d x)
+        f = num * inv
+        gq11 += u * s1
+        gq22 += u * s2
+        gq12 += u * 2.0 * s12
+        p1 = 2.0 * (q11 * n1r + q12 * n2r)  # d num / d n1r
+        p2 = 2.0 * (q22 * n2r + q12 * n1r)  # d num / d n2r
+        e2, f2 = 2.0 * detr, 2.0 * deti  # dd = detr^2 + deti^2
+        g11 += u * (-h2 * p2 + f * (e2 * m22r + f2 * mi))
+        g22 += u * (-h1 * p1 + f * (e2 * m11r + f2 * mi))
+        g12 += u * (h1 * p2 + f * e2 * a21)
+        g21 += u * (h2 * p1 + f * e2 * a12)
+    out[0], out[1], out[2], out[3] = g11, g12, g21, g22
+    out[4], out[5], out[6] = gq11, gq12, gq22
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def line_gradient(cw, sw, m, diff, theta, psi, wre, wim, out):  # pragma: no cover - compiled
+    """For the unit line cos(theta k + psi) (`line_transform` with amp 1, X_j its transform):
+    out = sum_j wre_j Re(Y_j) + wim_j Im(Y_j) for Y = X, dX / d theta and dX / d psi, analytically
+    in one pass over the ordinates, no complex array built. dX / d psi = i s X per sign s; per sign,
+    X = N / Q gives dX / d theta = s (dN - X dQ) / Q (N = A (1 - e^{i m s theta}), Q = 1 - e^{i s
+    theta} e^{-i w_j}); next to a pole (`line_transform`'s sines) X = A K(d), dK / dd = e^{i (m - 1)
+    d / 2} (i (m - 1) / 2 R + R'), R = sin(m d / 2) / sin(d / 2) (R' by its Taylor series for small m d)."""
+    cre = np.empty(2)  # per sign: A = (1 / 2) e^{i s psi} [(e^{i s theta} - 1)]
+    cim = np.empty(2)
+    dare = np.empty(2)  # d A / d (s theta)
+    daim = np.empty(2)
+    nre = np.empty(2)  # N = A (1 - e^{i m s theta})
+    nim = np.empty(2)
+    dnre = np.empty(2)  # d N / d (s theta)
+    dnim = np.empty(2)
+    ere = np.empty(2)  # e^{i s theta}
+    eim = np.empty(2)
+    for s in range(2):
+        sg = 1.0 if s == 0 else -1.0
+        th, ph = sg * theta, sg * psi
+        ar, ai = 0.5 * math.cos(ph), 0.5 * math.sin(ph)
+        er, ei = math.cos(th), math.sin(th)
+        if diff:  # A = A0 (e^{i th} - 1), dA = A0 i e^{i th}
+            dar, dai = -(ar * ei + ai * er), ar * er - ai * ei
+            ar, ai = ar * (er - 1.0) - ai * ei, ar * ei + ai * (er - 1.0)
+        else:
+            dar, dai = 0.0, 0.0
+        cmt, smt = math.cos(m * th), math.sin(m * th)
+        br, bi = 1.0 - cmt, -smt  # B = 1 - e^{i m th}, dB = -i m e^{i m th}
+        dbr, dbi = m * smt, -m * cmt
+        cre[s], cim[s], dare[s], daim[s] = ar, ai, dar, dai
+        nre[s], nim[s] = ar * br - ai * bi, ar * bi + ai * br
+        dnre[s] = dar * br - dai * bi + ar * dbr - ai * dbi
+        dnim[s] = dar * bi + dai * br + ar * dbi + ai * dbr
+        ere[s], eim[s] = er, ei
+    g0, gt, gp = 0.0, 0.0, 0.0
+    for j in range(cw.shape[0]):
+        tr, ti, ttr, tti = 0.0, 0.0, 0.0, 0.0  # X and dX / d theta at this ordinate
+        for s in range(2):
+            sg = 1.0 if s == 0 else -1.0
+            qr = 1.0 - (ere[s] * cw[j] + eim[s] * sw[j])
+            qi = -(eim[s] * cw[j] - ere[s] * sw[j])
+            den = qr * qr + qi * qi
+            if den > 1e-14:
+                inv = 1.0 / den
+                xr = (nre[s] * qr + nim[s] * qi) * inv
+                xi = (nim[s] * qr - nre[s] * qi) * inv
+                dqr, dqi = -qi, qr - 1.0  # dQ = i (Q - 1)
+                ur = dnre[s] - (xr * dqr - xi * dqi)
+                ui = dnim[s] - (xr * dqi + xi * dqr)
+                dxr = (ur * qr + ui * qi) * inv
+                dxi = (ui * qr - ur * qi) * inv
+            else:  # on (or next to) the ordinate: X = A K(d), d = s theta - w_j
+                d = sg * theta - 2.0 * math.pi * (j + 1) / m
+                d = d - 2.0 * math.pi * round(d / (2.0 * math.pi))
+                half = math.sin(0.5 * d)
+                x = 0.5 * d
+                if abs(half) < 1e-300:
+                    mag, dmag = float(m), 0.0
+                else:
+                    mag = math.sin(0.5 * m * d) / half
+                    if abs(m * x) < 1e-3:  # R' = (m / 2) [(1 - m^2) x / 3 + 4 x^3 (7 / 360 - m^2 / 36 + m^4 / 120)]
+                        mm = float(m) * float(m)
+                        dmag = (
+                            0.5 * m * ((1.0 - mm) * x / 3.0 + 4.0 * x**3 * (7.0 / 360.0 - mm / 36.0 + mm * mm / 120.0))
+                        )
+                    else:
+                        dmag = 0.5 * (m * math.cos(m * x) * half - math.sin(m * x) * math.cos(x)) / (half * half)
+                ca, sa = math.cos(0.5 * (m - 1) * d), math.sin(0.5 * (m - 1) * d)
+                kr, ki = mag * ca, mag * sa
+                hm = 0.5 * (m - 1) * mag  # dK = e^{i a} (dmag + i hm)
+                dkr, dki = dmag * ca - hm * sa, dmag * sa + hm * ca
+                xr = cre[s] * kr - cim[s] * ki
+                xi = cre[s] * ki + cim[s] * kr
+                dxr = dare[s] * kr - daim[s] * ki + cre[s] * dkr - cim[s] * dki
+                dxi = dare[s] * ki + daim[s] * kr + cre[s] * dki + cim[s] * dkr
+            tr += xr
+            ti += xi
+            ttr += sg * dxr
+            tti += sg * dxi
+            gp += sg * (-wre[j] * xi + wim[j] * xr)  # d X / d psi = i s X
+        g0 += wre[j] * tr + wim[j] * ti
+        gt += wre[j] * ttr + wim[j] * tti
+    out[0], out[1], out[2] = g0, gt, gp
+
+
+@njit(cache=True, fastmath=False, nogil=True)
 def dot(a, b):  # pragma: no cover - compiled
     """sum_j a_j b_j in one thread (a BLAS dot spins threads up: 3-5x slower on a busy machine)."""
     acc = 0.0
@@ -193,6 +336,22 @@ class Periodogram:
         out = np.empty(self.c.size, dtype=complex)
         line_transform(self.cw, self.sw, self.m, self.differences, theta, psi, amp, out)
         return out
+
+    def line_gradient(self, theta: float, psi: float, wre: np.ndarray, wim: np.ndarray) -> np.ndarray:
+        """(sum_j wre_j Re Y_j + wim_j Im Y_j) for Y = the unit line's `transform` and its derivatives in
+        theta and psi (`line_gradient`), one pass over the ordinates."""
+        out = np.empty(3)
+        line_gradient(self.cw, self.sw, self.m, self.differences, theta, psi, wre, wim, out)
+        return out
+
+    def block_gradient(
+        self, phi: np.ndarray, q: np.ndarray, h: np.ndarray, o: int, size: int, slope: np.ndarray
+    ) -> np.ndarray:
+        """sum_j slope_j d f_j / d e for each table entry e of one block (`block_gradient`; 2 values
+        for a 1 x 1 block, 7 for a 2 x 2 one), one pass over the ordinates."""
+        out = np.empty(7)
+        block_gradient(self.cw, self.sw, self.c, self.differences, phi, q, h, int(o), int(size), slope, out)
+        return out[: 2 if size == 1 else 7]
 
     def power(self, spec: np.ndarray) -> np.ndarray:
         """I_j = |spec_j|^2 / m of a `transform`."""

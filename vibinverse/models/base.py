@@ -31,12 +31,15 @@ class LineTest:
     """One line the fit claims: `label` names it in the summary (`{label}_detected`, ...), `null`
     are the values that remove it from the model (an amplitude set to 0), and `frequency` is the
     name of its frequency when that is free (the look-elsewhere effect), else None; `deterministic`
-    marks a line of fixed amplitude (`vibinverse.stationarity` checks it)."""
+    marks a line of fixed amplitude (`vibinverse.stationarity` checks it); `near` the parameters
+    that can take back its power when it is removed (the components whose band reaches it and the
+    broadband terms: `vibinverse.detection.null_optimum` refits these first), None for all."""
 
     label: str
     null: dict[str, float]
     frequency: str | None
     deterministic: bool = False  # a line of fixed amplitude (not a noise-driven resonance): its stationarity is checked
+    near: tuple[str, ...] | None = None
 
 
 class SignalModel(ABC):

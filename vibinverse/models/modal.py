@@ -110,6 +110,9 @@ from vibinverse.terms.resonance import Oscillator
 #: likelihood (`vibinverse.engines.whittle`; `ModalModel.spectral`), 10x cheaper per call than the
 #: Kalman filter there and within a few percent of its interval widths (tests/vibinverse/engines/test_whittle.py)
 WHITTLE_MIN_SAMPLES = 20_000
+#: a mode or line this close to a component whose detection test removes it (Fourier bins, plus
+#: half-power half-widths of either) is refitted first with the null (`near_parameters`)
+NEAR_REACH_BINS, NEAR_REACH_WIDTHS = 20.0, 5.0
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -610,7 +613,11 @@ class ModalModel(SignalModel):
     def _base(self) -> dict[str, float]:
         """Every parameter's value when neither given nor fixed (computed once)."""
         if self._base_values is None:
-            self._base_values = {**self._spectral_guesses()[0], **self._start, **self._fixed_values}
+            given = {**self._start, **self._fixed_values}
+            # the spectral guesses (a least-squares sinusoid per line on a fine grid: ~1 s a call on a
+            # 60,000-sample record) only where the start and the table leave a parameter without one
+            covered = all(n in given for n in self._names)
+            self._base_values = given if covered else {**self._spectral_guesses()[0], **given}
         return self._base_values
 
     def tables(
@@ -792,10 +799,12 @@ class ModalModel(SignalModel):
     def whittle_gradient(self, values: dict[str, float], names: list[str] | None = None) -> dict[str, float]:
         """d ln L / d value of Whittle's log-likelihood (`_whittle`) at `values` for each of `names`
         (default: every parameter), from its linearization: d ln L = sum_j w_j (I_j / f_j^2 - 1 / f_j)
-        df_j - sum_j w_j / f_j dI_j, plus the level term's change. df_j is the change of the blocks
-        whose tables a parameter moves (and of r and the end-to-end share), dI_j = 2 Re(X_j* dX_j) / m
-        of the lines' transforms; each by a forward step of 1e-7 of the value's scale, without the
-        logarithms and the other blocks of a whole call (~10x cheaper than a call per parameter)."""
+        df_j - sum_j w_j / f_j dI_j, plus the level term's change. Analytic: df_j in each table entry of
+        a block (`Periodogram.block_gradient`, one pass over the ordinates per block a parameter moves,
+        shared by its parameters) and dI_j = 2 Re(X_j* dX_j) / m in a line's frequency, amplitude and
+        phase (`Periodogram.line_gradient`, one pass per line). Still forward steps of 1e-7 of the
+        value's scale: the small tables' entries in a state parameter (its own term's blocks refilled
+        alone, `_term_tables`), r and the end-to-end share, and the level term."""
         if self.spectral is None:
             raise Unsupported("the gradient is of Whittle's likelihood (a long steady record)")
         sp, h = self.spectral, self.h
@@ -822,37 +831,42 @@ class ModalModel(SignalModel):
         slope = inverse * (power / density - 1.0)  # d ln L / d f_j
         ends = 2.0 / sp.m if sp.differences else 0.0  # d f_j / d v0 (every ordinate)
         gain = sp.c if sp.differences else np.ones(density.size)  # d f_j / d r
+        f0 = sp.zero_density(phi, q, h, r, starts, sizes)
+        walk = walk_step_variance(phi, q, h, starts, sizes)
         if self._level_window is None:
-            self._level_window = level_window(
-                sp.zero_density(phi, q, h, r, starts, sizes), walk_step_variance(phi, q, h, starts, sizes), self.t.size
-            )
+            self._level_window = level_window(f0, walk, self.t.size)
         k = self._level_window
 
         def level(phi_: np.ndarray, q_: np.ndarray, p0_: np.ndarray, r_: float, e: float) -> float:
             v = float(h @ p0_ @ h) + r_
-            f0 = sp.zero_density(phi_, q_, h, r_, starts, sizes)
-            return level_term(e, k, f0, v, walk_step_variance(phi_, q_, h, starts, sizes))
+            f0_ = sp.zero_density(phi_, q_, h, r_, starts, sizes)
+            return level_term(e, k, f0_, v, walk_step_variance(phi_, q_, h, starts, sizes))
 
         lines_at = lines_sum(k, theta, psi, amp) / k if self.spec.lines else 0.0
         e0 = self._leading_mean(k) - self.value(values, "level") - lines_at
-        base_level = level(phi, q, p0, r, e0)
+        base_level = level_term(e0, k, f0, v0, walk)
         line_of = {
             f"lines[{j}].{field}": (j, i)
             for j in range(self.spec.lines)
             for i, field in enumerate(("frequency", "amplitude", "phase"))
         }
-        parts = dict(self._line_parts)  # the lines' transforms at `values`, where the last call left them
-        # what every parameter's slope shares: sum_j slope_j f_j of each block, of r and of the ends
+        # what every parameter's slope shares: sum_j slope_j df_j / d(r, v0)
         slope_r, slope_ends = dot(slope, np.ascontiguousarray(gain)), ends * float(slope.sum())
-        blocks: dict[int, float] = {}
+        term_of = {n: i for i, term_names in enumerate(self._state_names) for n in term_names}
+        blocks: dict[int, np.ndarray] = {}  # sum_j slope_j df_j / d entry, per block
 
-        def block_slope(b: int) -> float:
-            if b not in blocks:
-                blocks[b] = dot(slope, sp.density(phi, q, h, 0.0, starts[b : b + 1], sizes[b : b + 1]))
-            return blocks[b]
+        def entries(phi_: np.ndarray, q_: np.ndarray, b: int) -> np.ndarray:
+            o = int(starts[b])
+            if sizes[b] == 1:
+                return np.array([phi_[o, o], q_[o, o]])
+            a, c = phi_[o : o + 2, o : o + 2], q_[o : o + 2, o : o + 2]
+            return np.array([a[0, 0], a[0, 1], a[1, 0], a[1, 1], c[0, 0], c[0, 1], c[1, 1]])
 
         if rest is not None:
-            weighted_re, weighted_im = inverse * rest.real, inverse * rest.imag
+            weighted_re = np.ascontiguousarray(inverse * rest.real)
+            weighted_im = np.ascontiguousarray(inverse * rest.imag)
+            grid = (self.t[-1] - self.t[0]) / (self.t.size - 1)  # `_line_phasors`' theta = 2 pi f grid
+        lines: dict[int, np.ndarray] = {}  # d ln L / d (amp, theta / amp, psi / amp), per line
         out: dict[str, float] = {}
         for name in names:
             v = self.value(values, name)
@@ -865,34 +879,67 @@ class ModalModel(SignalModel):
                 step = 1e-6 * min(abs(v), 1.0 / max(self.span, self.dt)) or 1e-300
             moved = {**values, name: v + step}
             if name == "level":
-                out[name] = (level(phi, q, p0, r, e0 - step) - base_level) / step
+                out[name] = (level_term(e0 - step, k, f0, v0, walk) - base_level) / step
             elif name in line_of:
                 j, field = line_of[name]
+                if j not in lines:  # -sum_j w_j / f_j dI_j with dX = -d(line's transform)
+                    lines[j] = (2.0 / sp.m) * sp.line_gradient(float(theta[j]), float(psi[j]), weighted_re, weighted_im)
+                g_amp, g_theta, g_psi = lines[j]
+                if field == 1:
+                    d_ll = g_amp
+                elif field == 2:
+                    d_ll = amp[j] * g_psi
+                else:  # theta = 2 pi f grid, psi = 2 pi f t_0 + phase
+                    d_ll = amp[j] * 2.0 * math.pi * (g_theta * grid + g_psi * self.t[0])
                 th, ps, am = self._line_phasors(moved)
-                key = (float(theta[j]), float(psi[j]), float(amp[j]))
-                here = parts.get(key)
-                if here is None:
-                    here = parts[key] = sp.line_transform(*key)
-                if field == 1 and amp[j] != 0.0:  # linear in the amplitude
-                    d_rest = here * (-step / amp[j])
-                else:
-                    d_rest = here - sp.line_transform(th[j], ps[j], am[j])
-                # -sum_j w_j / f_j dI_j, dI_j = 2 Re(X_j* dX_j) / m
-                d_ll = -(2.0 / sp.m) * (dot(weighted_re, d_rest.real) + dot(weighted_im, d_rest.imag))
                 e1 = self._leading_mean(k) - self.value(values, "level") - lines_sum(k, th, ps, am) / k
-                out[name] = (d_ll + level(phi, q, p0, r, e1) - base_level) / step
+                out[name] = d_ll + (level_term(e1, k, f0, v0, walk) - base_level) / step
             else:
-                _, phis1, qs1, r1, p01 = self.tables(moved, with_mean=False)
-                phi1, q1 = phis1[0], qs1[0]
+                if name in term_of:  # its own term's blocks
+                    phi1, q1, p01, moves = self._term_tables(term_of[name], moved, phi, q, p0)
+                    r1 = r
+                elif name == "noise.sigma":  # r alone
+                    phi1, q1, p01, moves = phi, q, p0, range(0)
+                    r1 = float(v + step) ** 2 if self.spec.white else 0.0
+                else:  # anything else: every block's tables
+                    _, phis1, qs1, r1, p01 = self.tables(moved, with_mean=False)
+                    phi1, q1, p01, moves = phis1[0].copy(), qs1[0].copy(), p01.copy(), range(starts.size)
                 changed = (r1 - r) * slope_r + (float(h @ p01 @ h) + r1 - v0) * slope_ends
-                for b, (o, s) in enumerate(zip(starts, sizes)):
-                    blk = slice(o, o + s)
-                    if np.array_equal(phi1[blk, blk], phi[blk, blk]) and np.array_equal(q1[blk, blk], q[blk, blk]):
+                for b in moves:
+                    d = entries(phi1, q1, b) - entries(phi, q, b)
+                    if not d.any():
                         continue
-                    changed += dot(slope, sp.density(phi1, q1, h, 0.0, starts[b : b + 1], sizes[b : b + 1]))
-                    changed -= block_slope(b)
-                out[name] = (changed + level(phi1.copy(), q1.copy(), p01.copy(), r1, e0) - base_level) / step
+                    if b not in blocks:
+                        blocks[b] = sp.block_gradient(phi, q, h, starts[b], sizes[b], slope)
+                    changed += float(blocks[b] @ d)
+                out[name] = (changed + level(phi1, q1, p01, r1, e0) - base_level) / step
         return out
+
+    def _term_tables(
+        self, term: int, values: dict[str, float], phi: np.ndarray, q: np.ndarray, p0: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, range]:
+        """(Phi, Q, P0) of the first step (`tables`' phis[0], qs[0], P0) with state term `term`'s
+        blocks refilled at `values` and the others' entries kept from (phi, q, p0) (copies), and
+        the range of its blocks: what `tables` gives when only that term's values move."""
+        first = sum(len(t.blocks(self.facts)) for t in self.state_terms[:term])
+        forms = self.state_terms[term].form_parameters(
+            {n: self.value(values, n) for n in self._state_names[term]}, self.facts
+        )
+        count = len(forms)
+        if not count:
+            return phi, q, p0, range(first, first)
+        pars = np.zeros((count, 3))
+        for b, p in enumerate(forms):
+            pars[b, : len(p)] = p
+        lo = int(self.offsets[first])
+        hi = int(self.offsets[first + count - 1] + self.block_sizes[first + count - 1])
+        phis, qs, p0s = np.zeros((1, hi - lo, hi - lo)), np.zeros((1, hi - lo, hi - lo)), np.zeros((hi - lo, hi - lo))
+        offsets = np.ascontiguousarray(self.offsets[first : first + count] - lo)
+        kinds = np.ascontiguousarray(self.kinds[first : first + count])
+        _fill_tables(kinds, pars, offsets, np.ascontiguousarray(self.steps[:1]), phis, qs, p0s)
+        phi1, q1, p01 = phi.copy(), q.copy(), p0.copy()
+        phi1[lo:hi, lo:hi], q1[lo:hi, lo:hi], p01[lo:hi, lo:hi] = phis[0], qs[0], p0s
+        return phi1, q1, p01, range(first, first + count)
 
     def _rest_without_lines(self, theta: np.ndarray, psi: np.ndarray, amp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(transform, periodogram) of the record less its lines: each line's transform kept with
@@ -1123,21 +1170,42 @@ class ModalModel(SignalModel):
     def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
         """The table's `start` first (the order search's optimum), else the spectral starts
         (`_spectral_guesses`)."""
-        spectral = self._spectral_guesses()
         if self._start:
-            return [{**spectral[0], **self._start}]
-        return spectral
+            return [{**{n: self.value({}, n) for n in self._names}, **self._start}]
+        return self._spectral_guesses()
 
     def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
-        """Each line (its amplitude to 0) and each mode (its rms to 0)."""
+        """Each line (its amplitude to 0) and each mode (its rms to 0), with the parameters near it
+        (`near_parameters`)."""
         out = []
         for j in range(self.spec.lines):
             f = f"lines[{j}].frequency"
-            out.append(LineTest(f"line_{j}", {f"lines[{j}].amplitude": 0.0}, f if f in free else None, True))
+            near = self.near_parameters(values, f"lines[{j}]")
+            out.append(LineTest(f"line_{j}", {f"lines[{j}].amplitude": 0.0}, f if f in free else None, True, near))
         for i in range(self.spec.modes):
             f = f"modes[{i}].frequency"
-            out.append(LineTest(f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None))
+            near = self.near_parameters(values, f"modes[{i}]")
+            out.append(LineTest(f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None, near=near))
         return out
+
+    def near_parameters(self, values: dict[str, float], component: str) -> tuple[str, ...]:
+        """The parameters that can take back `component`'s power (`"lines[j]"` or `"modes[i]"`) when
+        it is removed: its own, those of every mode and line whose band comes within NEAR_REACH_BINS
+        Fourier bins plus NEAR_REACH_WIDTHS half-power half-widths (zeta f, of either) of it, and
+        every parameter that is not a mode's or a line's (level, noise, drift, gain: broadband)."""
+        v = lambda n: self.value(values, n)
+        width = lambda c: v(f"{c}.damping_ratio") * v(f"{c}.frequency") if c.startswith("modes") else 0.0
+        f0, w0 = v(f"{component}.frequency"), width(component)
+        bins = NEAR_REACH_BINS / max(self.span, self.dt)
+        near = [
+            c
+            for c in (
+                *(f"modes[{i}]" for i in range(self.spec.modes)),
+                *(f"lines[{j}]" for j in range(self.spec.lines)),
+            )
+            if abs(v(f"{c}.frequency") - f0) <= bins + NEAR_REACH_WIDTHS * max(w0, width(c))
+        ]
+        return tuple(n for n in self._names if not n.startswith(("modes[", "lines[")) or n.split(".")[0] in near)
 
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
         """The observed information -d^2 log L / d theta^2 at `values` (its expectation is the
