@@ -6,6 +6,7 @@ time), and README.md stays a short page for newcomers, without dates. CI builds 
 import argparse
 import importlib.util
 import re
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -61,14 +62,21 @@ def test_the_readme_is_short_and_carries_no_dates():
     assert first_block[:2] == ["pip install . && vibinverse demo", 'pip install -e ".[test]" && pytest -n auto']
 
 
+def _update_pages():
+    """docs/validation/update_pages.py as a module (registered in sys.modules, as its dataclass needs)."""
+    spec = importlib.util.spec_from_file_location("update_pages", ROOT / "docs" / "validation" / "update_pages.py")
+    pages = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = pages
+    spec.loader.exec_module(pages)
+    return pages
+
+
 def test_the_real_data_page_shows_the_table_of_its_bench_json():
     """docs/validation/realdata.md's table is the one docs/validation/realdata_quick.json gives
     (`update_pages.py` writes both): no number on the page is typed by hand."""
     import json
 
-    spec = importlib.util.spec_from_file_location("update_pages", ROOT / "docs" / "validation" / "update_pages.py")
-    pages = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(pages)
+    pages = _update_pages()
     result = json.loads(pages.REALDATA_JSON.read_text())
     assert pages.table_block(result) in pages.REALDATA_PAGE.read_text()
     assert not any("/work/" in r.get("path", "") for r in result["rows"])  # no machine's directories
@@ -78,8 +86,50 @@ def test_the_oma_page_shows_the_table_of_its_bench_json():
     """docs/validation/oma.md's table is the one docs/validation/oma_quick.json gives (`update_pages.py`)."""
     import json
 
-    spec = importlib.util.spec_from_file_location("update_pages", ROOT / "docs" / "validation" / "update_pages.py")
-    pages = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(pages)
+    pages = _update_pages()
     result = json.loads(pages.OMA_JSON.read_text())
     assert pages.oma_block(result) in pages.OMA_PAGE.read_text()
+
+
+def test_the_robustness_estimators_and_speed_pages_show_the_tables_of_their_bench_json():
+    """docs/validation/robustness.md, estimators.md and speed.md (its two tables): each table is the
+    one its stored JSON beside the page gives (`update_pages.py` writes both, from the bench's own
+    table function), the figure is there, and the page states the command that reproduces it."""
+    import json
+
+    pages = _update_pages()
+    assert {b.name for b in pages.BLOCKS} == {"robustness", "estimators", "speed", "imaging"}
+    for block in pages.BLOCKS:
+        text = block.stored.read_text()
+        assert "/work/" not in text and "/home/" not in text, block.name  # no machine's directories
+        page = block.page.read_text()
+        assert block.block(json.loads(text)) in page, block.name
+        assert block.figure.is_file() and block.figure.stat().st_size > 10_000, block.figure
+        assert f"]({block.figure.name})" in page, block.name
+        assert block.command in page and "update_pages.py" in page, block.name
+
+
+def test_update_pages_regenerates_what_is_there_and_skips_the_rest(tmp_path, monkeypatch):
+    """update_pages.py on a directory holding only some benches' JSON updates those pages and leaves
+    the others; on a directory with none it stops with a message."""
+    import dataclasses
+    import json
+
+    import pytest
+
+    pages = _update_pages()
+    with pytest.raises(SystemExit, match="no bench JSON"):
+        pages.main(tmp_path)
+    block = next(b for b in pages.BLOCKS if b.name == "estimators")
+    page = tmp_path / "estimators.md"
+    page.write_text(f"before\n{block.begin}\nold\n{block.end}\nafter\n")
+    moved = dataclasses.replace(
+        block, page=page, stored=tmp_path / "kept.json", figure=tmp_path / "kept.png", plot=lambda r, p: p.touch()
+    )
+    monkeypatch.setattr(pages, "BLOCKS", (moved,))
+    bench = tmp_path / "bench"
+    bench.mkdir()
+    (bench / "estimators.json").write_text(block.stored.read_text())
+    assert pages.main(bench) == ["estimators.json"]
+    result = json.loads((tmp_path / "kept.json").read_text())
+    assert page.read_text() == f"before\n{block.block(result)}\nafter\n"

@@ -1,19 +1,30 @@
 """Regenerate the validation pages' measured tables and figures from the bench's JSON output, so that
-no number on them is typed by hand:
+no number on them is typed by hand. Run the benches into one directory, then this script on it:
 
-    vibinverse bench --realdata --quick -o bench
-    vibinverse bench --oma --quick -o bench
+    vibinverse bench --realdata --quick -o bench      # realdata.md
+    vibinverse bench --oma --quick -o bench           # oma.md
+    vibinverse bench --robustness --quick -o bench    # robustness.md (the full run: without --quick)
+    vibinverse bench --estimators --quick -o bench    # estimators.md
+    vibinverse bench --quick -o bench                 # speed.md, its first table
+    vibinverse bench --imaging --quick -o bench       # speed.md, its imaging table
     python docs/validation/update_pages.py bench
 
-writes docs/validation/realdata_quick.json (the bench's rows, paths relative to the corpus),
-realdata_quick.png (its figure) and the table of realdata.md between its two markers; likewise
-oma_quick.json, oma_quick.png and oma.md's table from oma.json. tests/test_docs.py checks that each
-page's table is the one its JSON gives."""
+For every bench whose JSON is in the directory (the others are skipped, and said so, and their pages
+left as they are) it writes a copy of the JSON beside its page (machine paths made relative; the
+robustness bench's per-fit records left out, as its table does not use them), the bench's figure,
+and the page's table between its two markers (`<!-- NAME table: update_pages.py -->` and
+`<!-- end of the NAME table -->`), made by the bench's own table function (`BLOCKS`; realdata.md
+and oma.md by `update_realdata` and `update_oma`). tests/test_docs.py checks that each page's table
+is the one its stored JSON gives."""
 
 from __future__ import annotations
 
+import importlib
 import json
+import re
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -84,16 +95,190 @@ def update_oma(bench_dir: Path) -> None:
     oma_plot(result, OMA_FIGURE)
 
 
+# ---- the pages made the same way from the other benches: one `Block` each ----------------------
+
+
+def _bench(module: str, name: str) -> Callable[..., Any]:
+    """vibinverse.bench.<module>.<name>, imported when called (each bench imports its own peers)."""
+    return lambda *args: getattr(importlib.import_module(f"vibinverse.bench.{module}"), name)(*args)
+
+
+def _seconds(result: dict[str, Any]) -> str:
+    s = result.get("seconds")
+    return f"; it ran {s / 60:.1f} min" if isinstance(s, (int, float)) else ""
+
+
+def _robustness_run(result: dict[str, Any]) -> str:
+    st = result.get("settings", {})
+    run = "quick run" if st.get("quick") else "full run"
+    cmd = "vibinverse bench --robustness" + (" --quick" if st.get("quick") else "")
+    seeds = st.get("seeds", ["?", "?"])
+    return (
+        f"The {run} (`{cmd}`): {st.get('n', '?')} data sets per case (seeds {seeds[0]}-{seeds[1]})"
+        f"{', at half the durations' if st.get('quick') else ''}, methods {', '.join(st.get('methods', []))}"
+        f"{_seconds(result)}. The cases:\n\n"
+        + "\n".join(f"- `{name}`: {what}" for name, what in st.get("cases", {}).items())
+    )
+
+
+def _robustness_stored(result: dict[str, Any]) -> dict[str, Any]:
+    """robustness.json without its per-fit records (`fits`, and the scene column's if there is one:
+    200 in a quick run, thousands in a full one), which the table and the figure do not use; the
+    bench's own JSON keeps them."""
+    kept = {k: v for k, v in result.items() if k != "fits"}
+    if isinstance(kept.get("scene"), dict):
+        kept["scene"] = {k: v for k, v in kept["scene"].items() if k != "fits"}
+    return kept
+
+
+def _estimators_run(result: dict[str, Any]) -> str:
+    st = result.get("settings", {})
+    mcmc = st.get("mcmc_seeds")
+    snrs = "/".join(str(s) for s in st.get("mcmc_snrs", []))
+    return (
+        f"This run: {st.get('n_seeds', '?')} data sets per method and SNR, {st.get('n_coverage_casadi', '?')} for "
+        f"casadi (whose coverage is scored), {mcmc} for importance sampling and emcee at SNR {snrs}"
+        f"{_seconds(result)}."
+    )
+
+
+def _speed_run(result: dict[str, Any]) -> str:
+    forward = result.get("forward") or [{}]
+    sub = forward[0].get("subpixels")
+    quick = result.get("long_modal_fit") is None and result.get("demo_mcmc") is None
+    side = f"{round(sub**0.5)}²" if sub else "?"
+    return (
+        f"This run: {'`vibinverse bench --quick`' if quick else '`vibinverse bench`'}, references at {side} "
+        f"subpixels{', without the demo MCMC and the long-record fit (the full run measures them)' if quick else ''}."
+    )
+
+
+def _imaging_run(result: dict[str, Any]) -> str:
+    quick = result.get("quick")
+    return (
+        f"This run: `vibinverse bench --imaging{' --quick' if quick else ''}`"
+        f"{' (half the frames for the detection and the fits, the shorter real video)' if quick else ''}"
+        f"{_seconds(result)}."
+    )
+
+
+def _imaging_stored(result: dict[str, Any]) -> dict[str, Any]:
+    """imaging.json with a skipped real video's reason stripped of the machine's directories."""
+    real = result.get("real_video") or {}
+    if "skipped" not in real:
+        return result
+    reason = re.sub(r"/\S*/(realdata-dev/)?", "", real["skipped"])
+    return {**result, "real_video": {**real, "skipped": reason}}
+
+
+@dataclass(frozen=True)
+class Block:
+    """A measured block of a validation page: `source`, the JSON the bench writes (`command`), gives
+    `table(result)` between the markers `<!-- NAME table: update_pages.py -->` and `<!-- end of the
+    NAME table -->` of `page`, under the sentence `caption(result)` says of the run; `stored` (the
+    JSON as kept beside the page, `keep(result)`) and `figure` (`plot(result, path)`) beside it."""
+
+    name: str
+    source: str
+    command: str
+    page: Path
+    stored: Path
+    figure: Path
+    table: Callable[[dict[str, Any]], str]
+    plot: Callable[[dict[str, Any], Path], None]
+    caption: Callable[[dict[str, Any]], str]
+    keep: Callable[[dict[str, Any]], dict[str, Any]] = lambda result: result
+
+    @property
+    def begin(self) -> str:
+        return f"<!-- {self.name} table: update_pages.py -->"
+
+    @property
+    def end(self) -> str:
+        return f"<!-- end of the {self.name} table -->"
+
+    def block(self, result: dict[str, Any]) -> str:
+        """The page's block made from `result` (the stored JSON): markers, the run's sentence, the table."""
+        return f"{self.begin}\n{self.caption(result)}\n\n```\n{self.table(result)}\n```\n{self.end}"
+
+    def update(self, bench_dir: Path) -> None:
+        """The stored JSON, the figure and the page's table from bench_dir/`source`."""
+        result = self.keep(json.loads((bench_dir / self.source).read_text()))
+        splice(self.page, self.begin, self.end, self.block(result))
+        self.stored.write_text(json.dumps(result, indent=1) + "\n")
+        self.plot(result, self.figure)
+
+
+BLOCKS = (
+    Block(
+        "robustness",
+        "robustness.json",
+        "vibinverse bench --robustness --quick",
+        HERE / "robustness.md",
+        HERE / "robustness.json",
+        HERE / "robustness.png",
+        _bench("robustness_bench", "table"),
+        lambda result, path: _bench("robustness_bench", "plot")(result["rows"], path),
+        _robustness_run,
+        _robustness_stored,
+    ),
+    Block(
+        "estimators",
+        "estimators.json",
+        "vibinverse bench --estimators --quick",
+        HERE / "estimators.md",
+        HERE / "estimators.json",
+        HERE / "estimators.png",
+        _bench("estimators_bench", "table"),
+        lambda result, path: _bench("estimators_bench", "plot_speed_error")(result["rows"], path),
+        _estimators_run,
+    ),
+    Block(
+        "speed",
+        "bench.json",
+        "vibinverse bench --quick",
+        HERE / "speed.md",
+        HERE / "speed.json",
+        HERE / "speed.png",
+        _bench("forward_bench", "table"),
+        lambda result, path: _bench("forward_bench", "plot_speed_error")(result["speed_error"], path),
+        _speed_run,
+    ),
+    Block(
+        "imaging",
+        "imaging.json",
+        "vibinverse bench --imaging --quick",
+        HERE / "speed.md",
+        HERE / "imaging.json",
+        HERE / "imaging.png",
+        _bench("imaging_bench", "table"),
+        _bench("imaging_bench", "plot"),
+        _imaging_run,
+        _imaging_stored,
+    ),
+)
+
+
+def main(bench_dir: Path) -> list[str]:
+    """Every page whose bench JSON is in `bench_dir`; returns the JSON files used (SystemExit: none)."""
+    done, skipped = [], []
+    for source, update in (("realdata.json", update_realdata), ("oma.json", update_oma)):
+        (done if (bench_dir / source).is_file() else skipped).append(source)
+        if (bench_dir / source).is_file():
+            update(bench_dir)
+    for b in BLOCKS:
+        (done if (bench_dir / b.source).is_file() else skipped).append(b.source)
+        if (bench_dir / b.source).is_file():
+            b.update(bench_dir)
+    if not done:
+        raise SystemExit(f"update_pages: no bench JSON in {bench_dir}; run `vibinverse bench ... -o {bench_dir}` first")
+    print(f"update_pages: updated from {', '.join(done)}")  # noqa: T201
+    if skipped:
+        print(f"update_pages: skipped (not in {bench_dir}): {', '.join(skipped)}; their pages are unchanged")  # noqa: T201
+    return done
+
+
 if __name__ == "__main__":
     if len(sys.argv) != 2:
         raise SystemExit("usage: python docs/validation/update_pages.py BENCH_DIR")
-    bench = Path(sys.argv[1])
-    done = []
-    if (bench / "realdata.json").is_file():
-        update_realdata(bench)
-        done.append("realdata")
-    if (bench / "oma.json").is_file():
-        update_oma(bench)
-        done.append("oma")
-    if not done:
-        raise SystemExit(f"update_pages: neither realdata.json nor oma.json in {bench}; run `vibinverse bench` first")
+    main(Path(sys.argv[1]))

@@ -305,3 +305,28 @@ def plot_speed_error(rows: list[dict], path: Path) -> None:
         ax.legend(fontsize=7, ncol=2)
     fig.savefig(path, dpi=100, format="png")
     plt.close(fig)
+
+
+def table(result: dict[str, Any]) -> str:
+    """`run`'s result (estimators.json) as fixed-width text, one block per scene: per method, SNR
+    and parameter the bias, RMSE, Cramer-Rao sd, RMSE / Cramer-Rao sd, 90 % coverage, seconds per
+    fit and the fits that reported no result (failed = declined + undetected, over n). Pure."""
+    fmt = lambda v, f: format("-", f">{f.split('.')[0]}") if v is None else format(v, f)
+    head = (
+        f"{'method':<11}{'SNR':>4} {'parameter':<20}{'bias':>11}{'rmse':>11}{'crlb_sd':>11}{'rmse/crlb':>10}"
+        f"{'cover90':>8}{'time_s':>8}{'failed':>8}"
+    )
+    rows = result.get("rows", [])
+    out: list[str] = []
+    for scene in dict.fromkeys(r.get("scene", "frame") for r in rows):
+        file = result.get("settings", {}).get("scenes", {}).get(scene)
+        out += [*([""] if out else []), f"{scene}{f' ({file})' if file else ''}:", head]
+        for r in (r for r in rows if r.get("scene", "frame") == scene):
+            ratio = r["rmse"] / r["crlb_sd"] if r["rmse"] is not None and r["crlb_sd"] else None
+            failed = f"{r['n_failed']}/{r['n']}"
+            out.append(
+                f"{r['method']:<11}{r['snr']:>4} {r['param'].rsplit('.', 1)[-1]:<20}{fmt(r['bias'], '11.3g')}"
+                f"{fmt(r['rmse'], '11.3g')}{fmt(r['crlb_sd'], '11.3g')}{fmt(ratio, '10.2f')}"
+                f"{fmt(r['coverage90'], '8.2f')}{r['time_s']:8.2f}{failed:>8}"
+            )
+    return "\n".join(out)

@@ -170,3 +170,86 @@ def run(scene_dir: Path, quick: bool, log=LOG) -> dict:
         log("default fit of a 36 000-sample three-mode record (no scene):")
         out["long_modal_fit"] = long_modal_fit_row(log=log)
     return out
+
+
+def table(result: dict[str, Any]) -> str:
+    """`run`'s result (bench.json) as fixed-width text: the forward model's fast path against the
+    dense reference per scene, its scaling, speed against error, the likelihoods against celerite2
+    and dense rendering, the design sweep, and the demo MCMC and the long-record default fit ("-"
+    where the run skipped them: `--quick`). Pure: reads `result` only."""
+    fmt = lambda v, f: format("-", f">{f.split('.')[0]}") if v is None else format(v, f)
+    out = ["forward model: dense reference against the fast path (same scene, same motion, one run)"]
+    out.append(
+        f"{'scene':<17}{'subpixels':>10}{'samples':>8}{'ref_s':>9}{'fast_s':>9}{'speedup':>9}{'rel_error':>10}  paths"
+    )
+    for r in result.get("forward", []):
+        paths = ", ".join(f"{k}: {v}" for k, v in r["paths"].items())
+        out.append(
+            f"{r['scene']:<17}{r['subpixels']:>10}{r['samples']:>8}{r['reference_s']:9.2f}{r['fast_s']:9.3f}"
+            f"{r['speedup']:8.0f}x{r['rel_error']:10.1e}  {paths}"
+        )
+    scaling = result.get("scaling", [])
+    if scaling:
+        samples = sorted({r["samples"] for r in scaling})
+        out += ["", "fast path's seconds, elastic roof: subpixels (rows) x samples (columns)"]
+        out.append(f"{'subpixels':<10}" + "".join(f"{n:>10}" for n in samples))
+        for n_sub in sorted({r["subpixels"] for r in scaling}):
+            by = {r["samples"]: r["fast_s"] for r in scaling if r["subpixels"] == n_sub}
+            out.append(f"{n_sub:<10}" + "".join(fmt(by.get(n), "10.3f") for n in samples))
+    if result.get("speed_error"):
+        out += ["", "speed against error, elastic roof (against one dense reference)"]
+        out.append(f"{'method':<7}{'setting':<12}{'time_s':>9}{'rel_error':>10}")
+        out += [
+            f"{r['method']:<7}{r['setting']:<12}{r['time_s']:9.3f}{r['rel_error']:10.1e}" for r in result["speed_error"]
+        ]
+    out += ["", "likelihoods against celerite2 (microseconds per evaluation; ratio = ours / celerite2)"]
+    out.append(f"{'model':<40}{'samples':>8}{'ours_us':>9}{'cel2_us':>9}{'ratio':>7}{'goal':>6}")
+    like = result.get("likelihood")
+    if like:
+        out.append(
+            f"{'sec. 4.2 frame (mean + Kalman)':<40}{like['samples']:>8}{like['ours_us']:9.0f}"
+            f"{fmt(like.get('celerite2_us'), '9.0f')}{fmt(like.get('ratio'), '7.2f')}{'-':>6}"
+        )
+        out.append(
+            f"{'sec. 4.2 frame (Kalman filter alone)':<40}{like['samples']:>8}{like['ours_filter_only_us']:9.0f}"
+            f"{fmt(like.get('celerite2_us'), '9.0f')}{fmt(like.get('filter_ratio'), '7.2f')}{'-':>6}"
+        )
+    for r in result.get("modal_likelihood") or []:
+        out.append(
+            f"{'modal: ' + r['model']:<40}{r['samples']:>8}{r['ours_us']:9.0f}{r['celerite2_us']:9.0f}"
+            f"{r['ratio']:7.2f}{r['goal']:6.1f}"
+        )
+    resp = result.get("response_likelihood")
+    if resp:
+        out += ["", "deterministic scene (sec. 4.1 elastic roof): one likelihood against dense rendering"]
+        out.append(
+            f"samples {resp['samples']}: ours {resp['ours_us']:.0f} us, dense {resp['dense_us'] / 1e3:.0f} ms "
+            f"({resp['speedup']:.0f}x); max error {resp['max_error_over_sigma']:.1e} sigma; MAP fit "
+            f"{resp['map_s']:.1f} s, errors {min(resp['map_error_sd'].values()):+.1f} .. "
+            f"{max(resp['map_error_sd'].values()):+.1f} sd"
+        )
+    design = result.get("design")
+    if design:
+        per = ", ".join(f"{w} worker(s) {ms:.2f} ms" for w, ms in design["ms_per_configuration"].items())
+        out += ["", f"design sweep, {design['configurations']} configurations: {per} per configuration"]
+    demo = result.get("demo_mcmc")
+    out.append("")
+    if demo is None:
+        out.append("demo MCMC to convergence: - (skipped with --quick)")
+    else:
+        out.append(
+            f"demo MCMC to convergence: {demo['wall_s']:.1f} s ({demo['mcmc_s']:.1f} s MCMC), {demo['n_steps']} "
+            f"steps, converged {demo['converged']}, R-hat {demo['rhat_max']:.3f}, ESS {fmt(demo['ess_min'], '.0f')}"
+        )
+    long = result.get("long_modal_fit")
+    if long is None:
+        out.append("default fit of a long three-mode record: - (skipped with --quick)")
+    else:
+        stages = ", ".join(f"{k} {v:.1f} s" for k, v in long["timing"].items() if isinstance(v, (int, float)))
+        out.append(
+            f"default fit of a long three-mode record, {long['samples']} samples: {long['wall_s']:.1f} s "
+            f"(goal <= {long['goal_s']:.0f} s; {stages}); {long['modes_found']} modes, largest frequency error "
+            f"{fmt(long['max_frequency_error'], '.1e')}, intervals hold the truth: {long['intervals_hold_truth']}, "
+            f"posterior by {long['approximation']}"
+        )
+    return "\n".join(out)

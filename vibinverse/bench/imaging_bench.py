@@ -342,3 +342,52 @@ def plot(result: dict[str, Any], path: Path) -> None:
     axes[2].legend(fontsize=8)
     fig.savefig(path, dpi=110, format="png")  # `path` may be a temporary name (atomic write)
     plt.close(fig)
+
+
+def _met(ok: bool) -> str:
+    return "met" if ok else "missed"
+
+
+def table(result: dict[str, Any]) -> str:
+    """`run`'s result (imaging.json) as fixed-width text: the imager against its goal, detection
+    throughput against the numpy rfft and its peak memory against the cube, the real video's
+    `detect` (seconds, peak resident memory above the baseline against the `--memory` budget) or
+    why it was skipped, and the multi-pixel fit's cost and sd x sqrt(N) against one pixel's. Pure."""
+    im, d = result["imager"], result["detection"]
+    side = math.isqrt(im["pixels"])
+    out = [
+        f"imager, {side} x {side} pixels x {im['frames']} frames: {im['warm_s']:.2f} s warm "
+        f"({im['first_s']:.2f} s first call); goal <= {im['goal_s']:g} s: {_met(im['meets_goal'])}",
+        f"detect, {math.isqrt(d['pixels'])}^2 pixels x {d['frames']} frames ({d['cube_mb']:.0f} MB) from disk at "
+        f"{d['workers']} workers: {d['detect_s']:.2f} s, {d['throughput']:.3g} pixel-samples/s",
+        f"  against a single-threaded numpy rfft in memory ({d['rfft_s']:.2f} s, {d['rfft_throughput']:.3g} "
+        f"pixel-samples/s): {d['ratio']:.2f}x (goal >= {d['goal_ratio']:g}x: {_met(d['ratio'] >= d['goal_ratio'])})",
+        f"  peak memory of its arrays {d['peak_above_mb']:.0f} MB = {d['peak_fraction_of_cube']:.2f}x the cube; "
+        f"lines {', '.join(f'{f:.4g}' for f in d['lines_hz'])} Hz",
+    ]
+    real = result.get("real_video") or {}
+    if "seconds" in real:
+        out += [
+            f"real video {real['video']} at {real['fps']:g} fps, default --memory: {real['seconds']:.1f} s "
+            f"(goal <= {real['goal_s']:g} s: {_met(real['seconds'] <= real['goal_s'])})",
+            f"  peak resident memory {real['peak_mb']:.0f} MB, {real['above_base_mb']:.0f} MB above the "
+            f"{real['base_mb']:.0f} MB after the imports = {real['above_base_vs_budget']:.2f}x the "
+            f"{real['budget_mb']:.0f} MB budget; {real['lines']} lines, claimed "
+            f"{', '.join(f'{f:.4g}' for f in real['claimed_hz']) or 'none'} Hz",
+        ]
+    else:
+        out.append(f"real video: skipped ({real.get('skipped', 'not run')})")
+    out += [
+        "multi-pixel fit (casadi MAP of the frame model):",
+        f"{'pixels':>8}{'s':>8}{'cost/1':>8}{'sd_Hz':>10}{'sd*sqrtN/1':>12}",
+    ]
+    out += [
+        f"{r['pixels']:>8}{r['seconds']:8.2f}{r['cost_vs_one']:8.2f}{r['drive_frequency_sd']:10.3g}"
+        f"{r['sd_sqrt_n_vs_one']:12.2f}"
+        for r in result.get("fits", [])
+    ]
+    if result.get("fits"):
+        last = result["fits"][-1]
+        met = _met(last["cost_vs_one"] <= FIT_COST_GOAL)
+        out.append(f"(goal: {last['pixels']} pixels <= {FIT_COST_GOAL:g}x one pixel's time: {met})")
+    return "\n".join(out)
