@@ -251,6 +251,8 @@ def fit_series(
         result.data["components"] = post.model.components(result.point)
         if order is not None:
             result.timing["model_order_s"] = order.seconds
+            if order.capped:  # the record holds more modes or lines than the search may add
+                result.diagnostics["order_capped"] = order.capped
     elif order is not None:  # a scene's nuisance terms, chosen by the data
         result.diagnostics["nuisance_search"] = order.criterion
         result.timing["nuisance_search_s"] = order.seconds

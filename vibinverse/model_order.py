@@ -76,8 +76,10 @@ data sets (celerite2, told of the line: 0.559); at POSSIBLE_GAIN instead of 6, 6
 sets took a line next to the mode and their median went 0.415 -> 0.448 %, at 6 none did. A near
 line that gains POSSIBLE_GAIN (4.5, a 1.1 % tail) + ln M_near but is not kept is reported as
 ambiguous with the resonance's values it implies, and `vi.fit` adds that order's 90 % intervals.
-It stops when nothing changes, or at the caps (6 modes, 6 lines). A component the user fixes
-(`modes`, `lines`, `drift`, `noise` or `gain` in the `modal` table) is not searched; the white
+It stops when nothing changes, or at the caps (6 modes, 6 lines); at a cap, the next candidate of
+that kind is fitted alone, and when it would lower the BIC the result says so (`beyond_caps`). A
+component the user fixes (`modes`, `lines`, `drift`, `noise` or `gain` in the `modal` table) is
+not searched; the white
 noise is searched only with the coloured noise (and not when `white` is given). On a record long
 enough for Whittle's engine the gain drift is not searched: only the Kalman filter runs it (minutes
 a fit at 60,000 samples); a `gain` in the table fits one.
@@ -216,6 +218,9 @@ class OrderResult:
     #: the fitted order of each ambiguous reading that is a possible line next to a resonance, by its
     #: entry's "alternative" (`settle_near_lines`): the fit refits it for its intervals
     readings: dict[str, OrderFit] = field(default_factory=dict)
+    #: each kind (modes, lines) the search stopped at the cap of while one more would have lowered
+    #: the BIC (`beyond_caps`): {"kind", "cap", "what", "delta_bic"}
+    capped: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def spec(self) -> ModalSpec:
@@ -1000,7 +1005,43 @@ def choose_order(
         if final:
             break
         step += 1
-    return OrderResult(current, rows, time.perf_counter() - t0, ambiguous, readings)
+    capped = beyond_caps(series, current, search, (max_modes, max_lines), lowest)
+    for entry in capped:
+        logger.warning(
+            "model order: the search stopped at its cap of %d %s, and one more (%s) lowers the BIC by %.0f: the "
+            "record holds more than the fit describes (give `%s` in the `modal` table to fit more)",
+            entry["cap"],
+            entry["kind"],
+            entry["what"],
+            -entry["delta_bic"],
+            entry["kind"],
+        )
+    return OrderResult(current, rows, time.perf_counter() - t0, ambiguous, readings, capped)
+
+
+def beyond_caps(
+    series: Series, fit: OrderFit, search: dict[str, bool], caps: tuple[int, int], cycles: float = MIN_CYCLES
+) -> list[dict[str, Any]]:
+    """For each kind (modes, lines) searched and at its cap in `fit`: the candidate of that kind the
+    forward step would propose next (`candidates`, the cap raised by one), fitted with its own
+    parameters free (`partial_fit`: a lower bound of its gain); an entry {"kind", "cap", "what",
+    "delta_bic"} when that already lowers the BIC. The caps bound the search's time, not what
+    the record holds (the LIGO strain's violin modes fill the 6 lines)."""
+    out: list[dict[str, Any]] = []
+    counts = (fit.spec.modes, fit.spec.lines)
+    for i, kind in enumerate(("modes", "lines")):
+        if not search[kind] or counts[i] < caps[i]:
+            continue
+        raised = (caps[0] + (i == 0), caps[1] + (i == 1))
+        for c in candidates(fit, series, {**dict.fromkeys(search, False), kind: True}, raised, cycles):
+            try:
+                pf = partial_fit(series, fit, c)
+            except NumericalError:
+                continue
+            if pf.bic < fit.bic:
+                out.append({"kind": kind, "cap": caps[i], "what": c.what, "delta_bic": float(pf.bic - fit.bic)})
+                break
+    return out
 
 
 def fit_fixed(series: Series, spec: ModalSpec) -> OrderFit:

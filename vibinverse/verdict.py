@@ -320,6 +320,17 @@ def trust(summary: dict, lines: list[VerdictLine] | None = None) -> tuple[bool |
     multimodal = d.get("multimodal")
     for n in multimodal if isinstance(multimodal, list) else []:
         failed.append((f"{n} is multimodal: the summary mixes separate modes", f"{n} multimodal"))
+    capped = d.get("order_capped")
+    for entry in capped if isinstance(capped, list) else []:
+        if isinstance(entry, dict):
+            kinds = str(entry.get("kind", "components"))
+            unknown.append(
+                (
+                    f"the order search stopped at its cap of {entry.get('cap')} {kinds}, and one more "
+                    f"({entry.get('what')}) lowers the BIC: the fit leaves out {kinds} the record holds",
+                    f"more {kinds} than the cap of {entry.get('cap')}",
+                )
+            )
     ambiguous = d.get("ambiguous")
     if isinstance(ambiguous, list) and ambiguous:
         failed.append(

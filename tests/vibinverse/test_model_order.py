@@ -111,6 +111,27 @@ def test_a_harmonic_is_recorded_as_one_source():
     assert not any(r["tried"].startswith(("mode", "drift", "AR", "1/f")) for r in res.criterion)  # fixed: not searched
 
 
+def test_a_search_stopped_at_its_cap_says_one_more_would_lower_the_bic():
+    """Three strong lines, the search capped at two (choose_order's max_lines): the third, fitted
+    alone at the cap (`beyond_caps`), lowers the BIC by hundreds; the result, the fit's diagnostics
+    and the verdict say that the fit leaves it out. Under the cap nothing is reported."""
+    from vibinverse.verdict import trust
+
+    lines = [(1.5, 0.4, 0.2), (3.7, 0.3, -1.0), (6.2, 0.35, 0.5)]
+    t, y = simulate(2000, sigma=0.5, lines=lines, seed=3)
+    fixed = {"modal": {"modes": 0, "drift": False, "noise": "white"}}
+    capped = choose_order(vi.series(t, y), fixed, max_lines=2)
+    assert capped.spec.lines == 2 and len(capped.capped) == 1
+    (entry,) = capped.capped
+    assert (entry["kind"], entry["cap"]) == ("lines", 2) and entry["delta_bic"] < -100
+    assert entry["what"].startswith("line at ")
+    assert choose_order(vi.series(t, y), fixed).capped == []
+    summary = {"diagnostics": {"order_capped": capped.capped}}
+    trusted, reasons, short = trust(summary, [])
+    assert trusted is not True and "more lines than the cap of 2" in short
+    assert any("leaves out lines the record holds" in r for r in reasons)
+
+
 def test_irregular_stamps():
     """Jittered frames: the likelihood takes a (Phi, Q) per distinct step; the candidates come from
     the spectrum on the median step. A line at 3.3 Hz in white noise is found as one line."""
