@@ -175,7 +175,12 @@ def _open_checkpoint(path: Path, resume: bool, ident: dict[str, str]) -> Checkpo
                 has_chain = "mcmc" in fh
         except OSError as exc:
             raise InputError(f"--chain: cannot read the checkpoint {path}: {exc}") from None
-        if resume and has_chain:
+        if not has_chain:  # a checkpoint has its chain's group from its start (`reset`): this is another file
+            raise InputError(
+                f"--chain: {path} is an HDF5 file without a sampler chain (a result file?), not a checkpoint; "
+                "give the checkpoint (default DIR/result.chain.h5) or a new path"
+            )
+        if resume:
             if stored is None:
                 raise InputError(
                     f"--resume: {path} carries no identity (not written by this vibinverse); "

@@ -43,6 +43,7 @@ import numpy as np
 
 from vibinverse.errors import DataError, InputError
 from vibinverse.imaging.line_checks import VIBRATION
+from vibinverse.imaging.whitening import LARGEST_VALUE
 
 logger = logging.getLogger(__name__)
 
@@ -340,17 +341,30 @@ def noise_levels(matrix: PixelMatrix) -> NoiseLevels:
     sigma, mean = np.empty(matrix.n), np.empty(matrix.n)
     trace: np.ndarray | None = None
     freqs = np.empty(0)
+    largest = 0.0
     for sl, block in matrix.blocks():
         b = block[valid]
+        big = float(np.max(np.abs(b))) if b.size else 0.0
+        if big > LARGEST_VALUE:  # its squares, summed over the frames, leave float64
+            raise DataError(
+                f"cube: values up to {big:.3g} overflow the periodogram's float64 arithmetic (allowed up to "
+                f"{LARGEST_VALUE:g}); rescale the data"
+            )
         mean[sl] = b.mean(axis=0)
+        largest = max(largest, float(np.max(b.var(axis=0))) if b.size else 0.0)
         freqs, power = periodograms(tv, b)
         floor = noise_floor(power)
         tiny = 1e-30 * max(float(np.max(b.var(axis=0))), 1e-300)  # a constant pixel: no noise, no weight
         floor = np.maximum(floor, tiny)
         sigma[sl] = np.sqrt(floor)
-        part = (power / floor[:, None]).sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):  # a block of constant pixels: refused below
+            part = (power / floor[:, None]).sum(axis=0)
         trace = part if trace is None else trace + part
     assert trace is not None
+    if not largest > 0.0:
+        raise DataError(
+            "cube: every selected pixel is constant over the frames they all observe: nothing varies to fit"
+        )
     return NoiseLevels(valid, mean, sigma, freqs, trace, float(tv[-1] - tv[0]))
 
 

@@ -52,6 +52,9 @@ import numpy as np
 from vibinverse.errors import DataError, InputError
 
 FLOOR_HALF_WIDTH = 64  # h: the floor's windows are 2h + 1 = 129 Fourier bins
+#: the largest magnitude a pixel's value may have (`spectrum_rows`, `pixels.noise_levels`): its
+#: squares summed over 1e8 frames stay below float64's 1.8e308
+LARGEST_VALUE = 1e150
 MIN_HALF_WIDTH = 8  # fewer Fourier frequencies than 2 * 8 + 1 (35 frames): too short a record
 BASELINE_DEGREE = 3  # the smooth baseline: a cubic in ln f fitted to ln P
 BASELINE_DENSE, BASELINE_STRIDE = 256, 4  # ... at the first 256 frequencies and every 4th after
@@ -138,9 +141,12 @@ def frequency_grid(time: np.ndarray, band: tuple[float, float] | None = None) ->
     t = np.asarray(time, dtype=np.float64)
     if t.ndim != 1 or not np.all(np.isfinite(t)):
         raise DataError("time: stamps must be a finite 1-D coordinate, in seconds")
+    need = 2 * (2 * MIN_HALF_WIDTH + 1) + 1
+    if t.size < need:  # before the stamps' order: one frame has no order to break
+        raise DataError(f"time: {t.size} frame(s) are too few for a detection map (at least {need})")
     steps = np.diff(t)
-    if t.size < 2 or np.any(steps <= 0):
-        first = int(np.flatnonzero(steps <= 0)[0]) + 1 if t.size >= 2 else 0
+    if np.any(steps <= 0):
+        first = int(np.flatnonzero(steps <= 0)[0]) + 1
         raise DataError(f"time: stamps must increase strictly (index {first} does not)")
     mean_step = float(t[-1] - t[0]) / (t.size - 1)
     uniform = bool(np.max(np.abs(t - t[0] - mean_step * np.arange(t.size))) <= UNIFORM_TOLERANCE * mean_step)
@@ -149,7 +155,6 @@ def frequency_grid(time: np.ndarray, band: tuple[float, float] | None = None) ->
     n_freq = (t.size - 1) // 2 if uniform else math.floor(0.5 * span / dt + 1e-9) - 1
     half = min(FLOOR_HALF_WIDTH, (n_freq - 1) // 2)
     if half < MIN_HALF_WIDTH:  # (then n_freq >= 2 * MIN_HALF_WIDTH + 1 > LOW_BINS too)
-        need = 2 * (2 * MIN_HALF_WIDTH + 1) + 1
         raise DataError(f"time: {t.size} frames are too few for a detection map (at least {need})")
     df = 1.0 / span
     lo, hi = LOW_BINS, n_freq
@@ -208,6 +213,12 @@ def spectrum_rows(y: np.ndarray, grid: FrequencyGrid) -> tuple[np.ndarray, np.nd
     import scipy.fft
 
     n = y.shape[0]
+    big = float(np.max(np.abs(y))) if y.size else 0.0
+    if big > LARGEST_VALUE:  # NaN (a gap) passes: the cube's own checks take it
+        raise DataError(
+            f"cube: values up to {big:.3g} overflow the periodogram's float64 arithmetic (allowed up to "
+            f"{LARGEST_VALUE:g}); rescale the data"
+        )
     tc = grid.time - grid.time.mean()
     slope = (tc @ y) / float(tc @ tc)
     if grid.uniform:

@@ -148,6 +148,17 @@ def test_a_corrupt_or_foreign_checkpoint_is_a_one_line_error(short_data, tmp_pat
     r = run_cli(*fit_args(d, "bad", "--chain", str(text), steps=100))
     assert r.returncode == 2 and "not an HDF5 checkpoint" in r.stderr, r.stderr
     assert text.read_text() == "not a checkpoint"
+    # a result file (HDF5, no sampler chain) given as the checkpoint: refused with or without
+    # --resume, and left as it was (a run without --resume would have written its chain into it)
+    result = d / "ident" / "result.nc"
+    if not result.exists():
+        assert run_cli(*fit_args(d, "ident", steps=100)).returncode == 0
+    before = result.read_bytes()
+    for extra in (("--resume",), ()):
+        r = run_cli(*fit_args(d, "bad", *extra, "--chain", str(result), steps=100))
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert "without a sampler chain" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert result.read_bytes() == before
 
 
 def test_threaded_walkers_give_the_serial_chain(tmp_path):

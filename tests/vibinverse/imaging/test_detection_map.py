@@ -355,8 +355,10 @@ def test_a_cube_several_times_the_memory_given_is_processed(tmp_path):
     [
         (lambda c: c.rename({"x": "u"}), DataError, "cube: dimensions must be"),
         (lambda c: c.assign_coords(time=c.time.values[::-1]), DataError, "time: stamps must increase"),
-        (lambda c: c.isel(time=slice(0, 30)), DataError, "time: 30 frames are too few"),
+        (lambda c: c.isel(time=slice(0, 30)), DataError, r"time: 30 frame\(s\) are too few"),
+        (lambda c: c.isel(time=slice(0, 1)), DataError, r"time: 1 frame\(s\) are too few .* \(at least 35\)"),
         (lambda c: c.astype(complex), DataError, "cube: real numbers"),
+        (lambda c: c + 1e308, DataError, r"cube: values up to 1e\+308 overflow"),
     ],
 )
 def test_bad_cubes_are_one_line_errors(change, error, message):

@@ -278,3 +278,19 @@ def test_the_lines_of_a_detection_cluster_strongest_first(tmp_path):
     assert cluster_lines(path, 1) == [6.0, 2.5] and cluster_lines(path, 2) == [13.0]
     write_detection(tmp_path / "bare.nc", [[1, 0], [0, 0]])
     assert cluster_lines(tmp_path / "bare.nc", 1) == []
+
+
+@pytest.mark.parametrize(
+    ("values", "message"),
+    [
+        (np.full((200, 3, 3), 7.0), "every selected pixel is constant"),
+        (np.full((200, 3, 3), 1e308), r"values up to 1e\+308 overflow"),
+    ],
+)
+def test_a_constant_or_overflowing_cube_is_a_one_line_error(values, message):
+    """Nothing varies, or squares leave float64: a one-line DataError before any spectrum (a
+    constant cube and a cube of 1e308 ended in "SVD did not converge" with a traceback)."""
+    cube = xr.DataArray(values, dims=("time", "y", "x"), coords={"time": np.arange(200) / 50.0})
+    with pytest.raises(DataError, match=message) as info:
+        noise_levels(PixelMatrix(cube, np.ones((3, 3), bool)))
+    assert "\n" not in str(info.value)
