@@ -15,7 +15,7 @@ from typing import Any
 
 from forward.errors import SceneError
 from forward.materials import Fresnel, material_from_spec
-from forward.motion import MOTION_KINDS
+from forward.motion import MOTION_CLASSES, MOTION_KINDS
 from forward.polarizer import Polarizer
 from forward.scene import Footprint, Load, Noise, Sampling, Scene, Sensor, Sun, Surface, estimate_memory
 from forward.validation import MAX_DEPTH, Table, check_depth, one_line
@@ -151,14 +151,19 @@ def scene_from_table(data: dict[str, Any]) -> Scene:
 
 def _raw_loads(surfaces: object) -> dict[str, Load]:
     """Each moving surface's load from the raw table, before its motion is built: the number of
-    lines is the length of the longest flat list in its motion table (e.g. drive_frequency)."""
+    lines is the length of the longest of its kind's `line_keys` (e.g. drive_frequency); any other
+    key, known or not, is checked when the motion is built."""
     loads = {}
     for name, spec in surfaces.items() if isinstance(surfaces, dict) else ():
         motion = spec.get("motion") if isinstance(spec, dict) else None
         if not isinstance(motion, dict):
             continue
+        kind = motion.get("kind")
+        keys = MOTION_CLASSES[kind].line_keys if isinstance(kind, str) and kind in MOTION_CLASSES else ()
         lines, key = 1, f"surfaces.{name}.motion"
         for k, v in motion.items():
+            if k not in keys:
+                continue
             if isinstance(v, list) and len(v) > lines and not isinstance(v[0], (list, dict)):
                 lines, key = len(v), f"surfaces.{name}.motion.{k}"
         loads[str(name)] = Load(str(name), lines, one_line(key))

@@ -7,9 +7,11 @@ from forward.motion.plate import PlateMotion, poisson_shape
 
 # kind -> builder(table, x_range, y_range): how a scene file names a motion. New motions register
 # here; the scene code has no special cases.
-MOTION_KINDS = {"plate": PlateMotion.from_table, "frame": FrameMotion.from_table, "rayleigh": RayleighMotion.from_table}
+MOTION_CLASSES: dict[str, type[Motion]] = {"plate": PlateMotion, "frame": FrameMotion, "rayleigh": RayleighMotion}
+MOTION_KINDS = {kind: cls.from_table for kind, cls in MOTION_CLASSES.items()}
 
 __all__ = [
+    "MOTION_CLASSES",
     "MOTION_KINDS",
     "FrameMotion",
     "FrameParameters",

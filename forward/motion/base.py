@@ -9,13 +9,17 @@ paths of later issues can exploit; any other motion implements `slopes` directly
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 
 class Motion(ABC):
-    """A motion of a surface, seen through its slopes."""
+    """A motion of a surface, seen through its slopes. `line_keys`: the keys of its scene table
+    that list one value per sinusoidal line (what a simulation's memory grows with)."""
+
+    line_keys: ClassVar[tuple[str, ...]] = ()
 
     @abstractmethod
     def slopes(

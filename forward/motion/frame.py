@@ -484,6 +484,8 @@ class TiltSeries(ModalMotion):
 class FrameMotion(Motion):
     """The roof on its resonant frame; realized per simulation (the noise is random)."""
 
+    line_keys = ("drive_frequency", "drive_amplitude", "drive_phase")
+
     def __init__(self, params: FrameParameters, drive: Drive | None, noise_rms: float = 0.0, model: str = "linear"):
         self.params, self.drive, self.noise_rms, self.model = params, drive, float(noise_rms), model
 

@@ -90,6 +90,8 @@ class RayleighMotion(ModalMotion):
     frequencies (Hz), amplitudes A0 (m) at the piston, wave_speed v_R (m/s), phases (rad, default 0).
     """
 
+    line_keys = ("frequency", "amplitude", "phase")
+
     def __init__(
         self,
         center: tuple[float, float],

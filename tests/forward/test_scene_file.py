@@ -222,6 +222,18 @@ def test_many_drive_lines_are_refused_before_work_naming_the_estimate_and_the_li
         assert part in message, message
 
 
+def test_an_unknown_key_holding_a_long_list_is_unknown_not_a_memory_estimate():
+    """Only a motion kind's `line_keys` count lines before the motion is built: an unknown key
+    holding 3 million numbers is refused as unknown (it was "needs about 121 GB ... reduce
+    surfaces.roof.motion.bogus")."""
+    _, table = load_scene(SCENES / "roof_frame.toml")
+    table["surfaces"]["roof"]["motion"]["bogus"] = [0.0] * 3_000_000
+    with pytest.raises(SceneError) as err:
+        scene_from_table(table)
+    message = _one_line(err)
+    assert message.startswith("surfaces.roof.motion.bogus: unknown key") and "memory" not in message, message
+
+
 def test_many_samples_at_high_resolution_are_refused_before_work():
     with pytest.raises(SceneError) as err:
         load_scene(
