@@ -115,6 +115,7 @@ def fit_channels(args: argparse.Namespace, channels: Channels) -> dict[str, Any]
     from vibinverse.oma import identify
     from vibinverse.oma.plots import plot_oma
     from vibinverse.oma.report import write_oma_report
+    from vibinverse.oma.spectral_matrix import check_values
 
     for name in SERIES_ONLY:
         value = getattr(args, name, None)
@@ -128,6 +129,7 @@ def fit_channels(args: argparse.Namespace, channels: Channels) -> dict[str, Any]
     out = output_dir(args.output)
     files = {n: out / n for n in (SUMMARY, MODES_CSV, FIGURE, REPORT)}
     check_paths({f"-o {n}": p for n, p in files.items()}, {"data": args.data, "--geometry": args.geometry})
+    check_values(channels)  # a table the fit cannot take is refused before "data: ..." is announced
     logger.info(f"data: {channels.describe()}")
     for note in channels.notes:
         logger.info(f"data: {note}")

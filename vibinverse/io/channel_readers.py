@@ -1006,10 +1006,20 @@ class MatReader(ChannelReader):
 
     def read(self, p: Path, *, time_column: str | None = None, fs: float | None = None) -> Table:
         import h5py
+        from scipy.io.matlab import MatReadError
 
         try:
             arrays = _matlab_v73(p) if h5py.is_hdf5(p) else _matlab_v5(p)
-        except NotImplementedError as exc:
+        except (
+            NotImplementedError,
+            MatReadError,
+            ValueError,
+            TypeError,
+            KeyError,
+            IndexError,
+            OSError,
+            EOFError,
+        ) as exc:
             raise DataError(f"channels: cannot read the MATLAB file {p}: {first_line(exc)}") from None
         structs = [k for k, v in arrays.items() if isinstance(v, dict)]
         if len(arrays) == 1 and structs:

@@ -65,13 +65,10 @@ def responses(channels: Channels) -> Channels:
     return channels.select(list(names))
 
 
-def detrended(channels: Channels) -> tuple[np.ndarray, list[str]]:
-    """(samples, channels) values less each channel's least-squares line; gaps (NaN) set to 0 after it
-    (`MAX_GAP_FRACTION`). Notes say what was filled."""
-    v = np.array(channels.values, dtype=float)
-    n = v.shape[0]
-    notes: list[str] = []
-    good = np.isfinite(v)
+def check_values(channels: Channels) -> None:
+    """One-line DataError when the spectral fit cannot take the channels' values: more than
+    MAX_GAP_FRACTION of them missing, or a channel of fewer than 3 (before any work is announced)."""
+    good = np.isfinite(np.asarray(channels.values, dtype=float))
     frac = 1.0 - float(good.mean())
     if frac > MAX_GAP_FRACTION:
         worst = channels.names[int(np.argmin(good.mean(axis=0)))]
@@ -79,11 +76,25 @@ def detrended(channels: Channels) -> tuple[np.ndarray, list[str]]:
             f"channels {channels.source}: {frac:.1%} of the values are missing (worst: {worst}); the spectral "
             f"fit fills at most {MAX_GAP_FRACTION:.0%} with zeros"
         )
+    counts = good.sum(axis=0)
+    if np.any(counts < 3):
+        raise DataError(
+            f"channels {channels.source}: channel {channels.names[int(np.argmin(counts))]} has fewer than 3 values"
+        )
+
+
+def detrended(channels: Channels) -> tuple[np.ndarray, list[str]]:
+    """(samples, channels) values less each channel's least-squares line; gaps (NaN) set to 0 after it
+    (`MAX_GAP_FRACTION`). Notes say what was filled."""
+    check_values(channels)
+    v = np.array(channels.values, dtype=float)
+    n = v.shape[0]
+    notes: list[str] = []
+    good = np.isfinite(v)
+    frac = 1.0 - float(good.mean())
     k = np.arange(n, dtype=float)
     for c in range(v.shape[1]):
         g = good[:, c]
-        if g.sum() < 3:
-            raise DataError(f"channels {channels.source}: channel {channels.names[c]} has fewer than 3 values")
         slope, icept = np.polyfit(k[g], v[g, c], 1)
         v[:, c] = np.where(g, v[:, c] - (icept + slope * k), 0.0)
         if not np.any(np.abs(v[g, c]) > 1e-14 * max(float(np.max(np.abs(channels.values[g, c]))), 1e-300)):

@@ -375,7 +375,10 @@ FILE_VERBS = {
     "simulate": (["simulate", "FILE"], [".toml"]),
     "simulate --image": (["simulate", "FILE", "--image", "2,2"], [".toml"]),
     "design": (["design", "FILE"], [".toml"]),
-    "fit": (["fit", "FILE", "--method", "spectral"], [".csv", ".npy", ".npz", ".nc", ".tsv"]),
+    "fit": (
+        ["fit", "FILE", "--method", "spectral"],
+        [".csv", ".npy", ".npz", ".nc", ".tsv", ".parquet", ".mat", ".lvm", ".tdms", ".uff", ".txt"],
+    ),
     "fit --scene": (["fit", "DATA", "--scene", "FILE"], [".toml"]),
     "fit --pixels": (["fit", "FILE", "--pixels", "all"], [".npy", ".nc", ".mp4"]),
     "detect": (["detect", "FILE"], [".npy", ".nc", ".mp4", ".csv"]),
