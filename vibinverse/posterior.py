@@ -43,6 +43,16 @@ class Posterior:
         ll = self.model.log_likelihood(self.space.from_z(z))
         return lp + ll if math.isfinite(ll) else -math.inf
 
+    def gradient(self, z: np.ndarray) -> np.ndarray | None:
+        """d log posterior / dz: the model's own slope of its log-likelihood (`SignalModel.slope`,
+        e.g. Whittle's analytic gradient) through the transform, plus the prior's and the
+        Jacobian's (`ParameterSpace.log_prior_gradient_z`); None when the model has no slope."""
+        values = self.space.from_z(z)
+        slope = self.model.slope(values, self.space.names)
+        if slope is None:
+            return None
+        return self.space.gradient_z(z, slope) + self.space.log_prior_gradient_z(z)
+
     def log_posterior_at(self, values: dict[str, float]) -> float:
         """log posterior at parameter values (in the sampler's space, Jacobian included)."""
         return self.log_posterior(self.space.to_z(values))

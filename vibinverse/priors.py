@@ -158,6 +158,19 @@ class ParameterSpace:
                 out[i] = slope[name] * math.exp(prior.log_jacobian(float(z[i])))
         return out
 
+    def log_prior_gradient_z(self, z: np.ndarray) -> np.ndarray:
+        """d / dz of `log_prior_z`: each coordinate's own term by a central difference (a few
+        scalar evaluations; no likelihood)."""
+        out = np.zeros(len(self.names))
+        for i, (p, v) in enumerate(zip(self.priors, z)):
+            v = float(v)
+            h = 1e-6 * max(1.0, abs(v))
+            up, down = v + h, v - h
+            term_up = p.log_pdf(p.from_unbounded(up)) + p.log_jacobian(up)
+            term_down = p.log_pdf(p.from_unbounded(down)) + p.log_jacobian(down)
+            out[i] = (term_up - term_down) / (2.0 * h)
+        return np.where(np.isfinite(out), out, 0.0)
+
     def log_prior_z(self, z: np.ndarray) -> float:
         """log prior density of the values plus the log Jacobian of the transform."""
         total = 0.0

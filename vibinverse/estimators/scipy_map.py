@@ -43,6 +43,18 @@ def hessian(f, z: np.ndarray, steps: np.ndarray) -> np.ndarray:
     return h
 
 
+def gradient_hessian(grad: Callable[[np.ndarray], np.ndarray], z: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """The Hessian at z by central differences of the gradient `grad` (2 n gradient calls against
+    the ~2 n^2 calls of `hessian`), symmetrized."""
+    n = z.size
+    h = np.empty((n, n))
+    for i in range(n):
+        e = np.zeros(n)
+        e[i] = steps[i]
+        h[:, i] = (grad(z + e) - grad(z - e)) / (2 * steps[i])
+    return 0.5 * (h + h.T)
+
+
 def laplace_steps(f: Callable[[np.ndarray], float], z: np.ndarray, first: np.ndarray | None = None) -> np.ndarray:
     """Steps for the central-difference Hessian of f at its minimum z: a first pass with steps
     `first` (default 1e-4 max(1, |z|)) gives each coordinate's curvature c_i, the step is then
@@ -92,7 +104,7 @@ def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed
             zi = z0 if k == 0 else z0 + rng.normal(0.0, 0.05, z0.size)
             # whitened by the Laplace covariance at the start: a long record's curvatures span
             # orders of magnitude (a line's frequency against the noise's scale)
-            fits.append(polish(problem, zi, laplace_point(neg, zi, -neg(zi)).cov_z))
+            fits.append(polish(problem, zi, laplace_point(neg, zi, -neg(zi), negative_gradient(problem)).cov_z))
         return max(fits, key=lambda f: f.log_post)
     best = None
     for k in range(restarts):
@@ -109,10 +121,31 @@ def map_fit(problem: Posterior, start: dict[str, float], restarts: int = 2, seed
     return laplace_point(neg, best.x, float(-best.fun))
 
 
-def laplace_point(neg: Callable[[np.ndarray], float], z: np.ndarray, log_post: float) -> MapPoint:
+def negative_gradient(problem: Posterior) -> Callable[[np.ndarray], np.ndarray] | None:
+    """d (-log posterior) / dz of `problem` when its model has a slope of its own (else None); 0
+    where it is not finite."""
+    centre = {n: p.centre() for n, p in zip(problem.space.names, problem.space.priors)}
+    if problem.model.slope(centre, []) is None:
+        return None
+
+    def grad(z: np.ndarray) -> np.ndarray:
+        g = problem.gradient(z)
+        return np.zeros(z.size) if g is None else np.where(np.isfinite(g), -g, 0.0)
+
+    return grad
+
+
+def laplace_point(
+    neg: Callable[[np.ndarray], float],
+    z: np.ndarray,
+    log_post: float,
+    grad: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> MapPoint:
     """The MapPoint at the optimum z of -log posterior `neg`: Laplace covariance from its
-    central-difference Hessian (`laplace_steps`)."""
-    h = hessian(neg, z, laplace_steps(neg, z))
+    central-difference Hessian (`laplace_steps`), of the gradient `grad` of `neg` when given
+    (`gradient_hessian`)."""
+    steps = laplace_steps(neg, z)
+    h = hessian(neg, z, steps) if grad is None else gradient_hessian(grad, z, steps)
     ok = True
     try:
         cov = np.linalg.inv(h)
@@ -147,7 +180,11 @@ def polish(problem: Posterior, z0: np.ndarray, cov0: np.ndarray) -> MapPoint:
     def neg_u(u: np.ndarray) -> float:
         return neg(z0 + chol @ u)
 
+    grad = negative_gradient(problem)
+
     def grad_u(u: np.ndarray) -> np.ndarray:
+        if grad is not None:  # the model's own slope, through the whitening
+            return chol.T @ grad(z0 + chol @ u)
         g = np.empty(u.size)
         for i in range(u.size):
             e = np.zeros(u.size)
@@ -158,7 +195,7 @@ def polish(problem: Posterior, z0: np.ndarray, cov0: np.ndarray) -> MapPoint:
     res = minimize(neg_u, np.zeros(z0.size), jac=grad_u, method="BFGS", options={"gtol": POLISH_GTOL})
     u = res.x if res.fun <= neg_u(np.zeros(z0.size)) else np.zeros(z0.size)
     z = z0 + chol @ u
-    return laplace_point(neg, z, -neg(z))
+    return laplace_point(neg, z, -neg(z), grad)
 
 
 def laplace_draws(problem: Posterior, z: np.ndarray, cov_z: np.ndarray, seed: int, n: int = 2000) -> np.ndarray:
