@@ -36,6 +36,19 @@ from vibinverse.engines.kalman import njit
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
+@njit(cache=True, inline="always", fastmath=False, nogil=True)
+def block_terms(cwj, swj, a11, a12, a21, a22, h1, h2):  # pragma: no cover - compiled
+    """At one ordinate (cos w, sin w) of a 2 x 2 block (Phi entries, observation h1, h2): M = zI - Phi's
+    (M11, M22 real parts, their imaginary part sin w), h M^{-1}'s numerators n1 = h1 M22 - h2 M21,
+    n2 = h2 M11 - h1 M12 (real, imaginary) and det M (real, imaginary)."""
+    m11r, m22r, mi = cwj - a11, cwj - a22, swj
+    n1r, n1i = h1 * m22r + h2 * a21, h1 * mi
+    n2r, n2i = h2 * m11r + h1 * a12, h2 * mi
+    detr = m11r * m22r - mi * mi - a12 * a21
+    deti = (m11r + m22r) * mi
+    return m11r, m22r, mi, n1r, n1i, n2r, n2i, detr, deti
+
+
 @njit(cache=True, fastmath=False, nogil=True)
 def spectral_density(cw, sw, c, diff, phi, q, h, r, starts, sizes, out):  # pragma: no cover - compiled
     """The series' spectral density f(w) (diff 0), or its first differences' c(w) f(w) (diff 1), at
@@ -64,11 +77,7 @@ def spectral_density(cw, sw, c, diff, phi, q, h, r, starts, sizes, out):  # prag
             q11, q12, q22 = q[o, o], q[o, o + 1], q[o + 1, o + 1]
             # M = zI - Phi; h M^{-1} = (n1, n2) / det with n1 = h1 M22 - h2 M21, n2 = h2 M11 - h1 M12
             for j in range(nj):
-                m11r, m22r, mi = cw[j] - a11, cw[j] - a22, sw[j]
-                n1r, n1i = h1 * m22r + h2 * a21, h1 * mi
-                n2r, n2i = h2 * m11r + h1 * a12, h2 * mi
-                detr = m11r * m22r - mi * mi - a12 * a21
-                deti = (m11r + m22r) * mi
+                _, _, _, n1r, n1i, n2r, n2i, detr, deti = block_terms(cw[j], sw[j], a11, a12, a21, a22, h1, h2)
                 num = (
                     q11 * (n1r * n1r + n1i * n1i) + q22 * (n2r * n2r + n2i * n2i) + 2.0 * q12 * (n1r * n2r + n1i * n2i)
                 )
@@ -154,11 +163,7 @@ def block_gradient(cw, sw, c, diff, phi, q, h, o, size, slope, out):  # pragma: 
     q11, q12, q22 = q[o, o], q[o, o + 1], q[o + 1, o + 1]
     g11, g12, g21, g22, gq11, gq12, gq22 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     for j in range(nj):
-        m11r, m22r, mi = cw[j] - a11, cw[j] - a22, sw[j]
-        n1r, n1i = h1 * m22r + h2 * a21, h1 * mi
-        n2r, n2i = h2 * m11r + h1 * a12, h2 * mi
-        detr = m11r * m22r - mi * mi - a12 * a21
-        deti = (m11r + m22r) * mi
+        m11r, m22r, mi, n1r, n1i, n2r, n2i, detr, deti = block_terms(cw[j], sw[j], a11, a12, a21, a22, h1, h2)
         s1, s2, s12 = n1r * n1r + n1i * n1i, n2r * n2r + n2i * n2i, n1r * n2r + n1i * n2i
         num = q11 * s1 + q22 * s2 + 2.0 * q12 * s12
         dd = detr * detr + deti * deti
