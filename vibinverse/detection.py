@@ -158,14 +158,14 @@ def line_detection(posterior: Posterior, values: dict[str, float]) -> dict[str, 
             math.isfinite(gain)
             and (gain > limit or false_alarm_probability(gain, posterior, test.frequency) < REFIT_BELOW)
         )
+        whole = refit
         if refit and test.near is not None:  # first the parameters near it: a gain this refit
             # leaves below the limit is below it refitted in full; one NEAR_MARGIN times the limit or
             # more would need the far parameters to take back most of it (they cannot: their bands
             # do not reach the line, and the broadband terms are refitted here)
             gain = min(gain, ll - null_optimum(posterior, values, test, near=True))
-            if limit < gain < NEAR_MARGIN * limit:
-                gain = min(gain, ll - null_optimum(posterior, values, test))
-        elif refit:
+            whole = limit < gain < NEAR_MARGIN * limit
+        if whole:
             gain = min(gain, ll - null_optimum(posterior, values, test))
         out.update(
             {
