@@ -1,8 +1,7 @@
 """`bench --realdata`: the corpus loader on the real cases.json, the scoring on hand-made claims,
-the process limit, the missing-corpus error, and one real case end to end."""
+the missing-corpus error, and one real case end to end."""
 
 import os
-import time
 from pathlib import Path
 
 import pytest
@@ -10,6 +9,7 @@ import pytest
 from tests.conftest import run_cli
 from vibinverse.bench import realdata_bench as rb
 from vibinverse.bench import realdata_cases as rc
+from vibinverse.bench.limited_processes import StepResult
 from vibinverse.errors import InputError
 
 CORPUS = Path(__file__).resolve().parents[3].parent / "shared" / "realdata-dev"
@@ -201,32 +201,10 @@ def test_detection_lines_are_claimed_by_their_kind():
     assert claims[1].kind == "scattered" and "218" in claims[1].note
 
 
-# ------------------------------------------------------------------------------ the process limit
-def _sleep(seconds: float) -> dict:
-    time.sleep(seconds)
-    return {"slept": seconds}
-
-
-def _fail() -> dict:
-    raise ValueError("bad input\nsecond line")
-
-
-def _two_steps(first: float, limit: float):
-    a = yield rb.Step("a", _sleep, (first,), limit)
-    b = yield rb.Step("b", _fail, (), limit)
-    return [{"a": a.status, "b": b.status, "b_error": b.error, "value": a.value}]
-
-
-def test_steps_run_in_processes_and_a_slow_one_is_cut_at_its_limit():
-    out = rb.run_jobs([_two_steps(0.05, 5.0), _two_steps(30.0, 0.5)], workers=2)
-    assert out[0] == [{"a": "ok", "b": "error", "b_error": "ValueError: bad input", "value": {"slept": 0.05}}]
-    assert out[1][0]["a"] == "timeout" and out[1][0]["value"] is None
-
-
 def test_a_row_without_an_answer_says_so_in_the_table_and_the_figure(tmp_path):
     case = rc.Case("x_case", rc.SERIES, (), (_ref(12.0),), 0.5)
     file = rc.CaseFile(Path("VI0.txt"), label="VI0")
-    row = rb._row(case, file, "fit", rb.StepResult("timeout", 60.0))
+    row = rb._row(case, file, "fit", StepResult("timeout", 60.0))
     result = {"rows": [row], "settings": {"fit_limit_s": 60}, "seconds": 61}
     text = rb.table(result)
     assert "x_case" in text and "-/1" in text and "no answer within 60 s" in text
