@@ -378,12 +378,15 @@ def spectral_peaks(
     freqs: np.ndarray, power: np.ndarray, band: tuple[float, float], width: int, separation: float
 ) -> list[tuple[float, float]]:
     """Local maxima of the smoothed power inside `band`, strongest first, at least `separation` Hz
-    apart: (frequency, smoothed power / median smoothed power)."""
+    apart: (frequency, smoothed power / median smoothed power). The first and last bins count as
+    maxima when they exceed their one neighbour: a sway of 1-2 cycles in the record peaks in the
+    first Fourier bin (`spectrum` starts at one cycle per record)."""
     sm = smooth(power, width)
     sel = (freqs >= band[0]) & (freqs <= band[1])
     floor = float(np.median(sm[sel])) if sel.any() else 1.0
     idx = np.flatnonzero(sel)
-    peaks = [i for i in idx if 0 < i < sm.size - 1 and sm[i] >= sm[i - 1] and sm[i] >= sm[i + 1]]
+    padded = np.concatenate([[-np.inf], sm, [-np.inf]])
+    peaks = [i for i in idx if sm[i] >= padded[i] and sm[i] >= padded[i + 2]]
     peaks.sort(key=lambda i: -sm[i])
     out: list[tuple[float, float]] = []
     for i in peaks:
@@ -1101,7 +1104,7 @@ class ModalModel(SignalModel):
         with the roles of the sharpest peaks exchanged."""
         s = self.spec
         freqs, power = spectrum(self.y, self.steps[0] if self.steps.size == 1 else self.dt, self.t)
-        nyq, lo = 0.5 * self.series.fs, MIN_CYCLES / max(self.span, self.dt)
+        nyq, lo = 0.5 * self.series.fs, MIN_CYCLES / max(self.span, self.dt) * (1.0 + 1e-9)  # the prior's edge
         n = self.n_obs
         floor = (
             float(np.median(power[freqs > 0.5 * nyq])) / math.log(2.0)
@@ -1109,7 +1112,9 @@ class ModalModel(SignalModel):
             else float(np.median(power))
         )
         width = max(3, round(0.002 * freqs.size) | 1)
-        peaks = spectral_peaks(freqs, power, (lo, nyq * 0.999), width, separation=3 * width * (freqs[1] - freqs[0]))
+        # from the first Fourier bin (1 / (N dt): a cycle in N dt, just under one in the span (N - 1) dt)
+        first = min(lo, float(freqs[0]))
+        peaks = spectral_peaks(freqs, power, (first, nyq * 0.999), width, separation=3 * width * (freqs[1] - freqs[0]))
         need = s.modes + s.lines
         while len(peaks) < need:  # fewer peaks than components: spread the rest over the band
             peaks.append((lo + (nyq - lo) * (len(peaks) + 1) / (need + 1), 1.0))
@@ -1145,7 +1150,7 @@ class ModalModel(SignalModel):
             for j, f in enumerate(line_f):
                 i = int(np.argmin(np.abs(freqs - f)))  # the highest raw bin near the smoothed peak
                 i = max(i - width, 0) + int(np.argmax(power[max(i - width, 0) : i + width + 1]))
-                fine = np.linspace(freqs[max(i - 1, 0)], freqs[min(i + 1, freqs.size - 1)], 21)
+                fine = np.linspace(max(freqs[max(i - 1, 0)], lo), max(freqs[min(i + 1, freqs.size - 1)], lo), 21)
                 best = max(fine, key=lambda ff: sinusoid(self.t, y0, ff)[0])
                 a, ph, _ = sinusoid(self.t, y0, best)
                 g[f"lines[{j}].frequency"], g[f"lines[{j}].amplitude"], g[f"lines[{j}].phase"] = float(best), a, ph

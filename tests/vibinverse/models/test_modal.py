@@ -595,3 +595,23 @@ def test_a_head_keeps_the_whole_records_flicker_term():
     assert h.flicker_terms == m.flicker_terms == 4  # 150 s at 20 Hz: 1500 cycles per record to Nyquist
     np.testing.assert_array_equal(h.tables(values)[1][0], m.tables(values)[1][0])
     assert ModalModel({"modal": {"noise": "1/f"}}, s.head(200)).flicker_terms == FLICKER_MIN_TERMS
+
+
+def test_spectral_start_finds_a_sway_of_under_two_cycles_in_the_first_fourier_bin():
+    """A line of 1.6 cycles in the record peaks in the first Fourier bin (1 / (N dt), just under the
+    frequency prior's edge of one cycle in the span): the spectral start took the strongest noise
+    peak elsewhere (11.7 Hz) and the fixed-order fit stayed there."""
+    from vibinverse.models.modal import ModalModel
+
+    rng = np.random.default_rng(7)
+    t = np.arange(192) / 24.0
+    f = 0.2029  # 1.6 cycles in 7.96 s
+    y = 2.0 + 0.5 * np.cos(2 * np.pi * f * t + 1.0) + 0.6 * rng.standard_normal(t.size)
+    table = {"modal": {"modes": 0, "lines": 1, "drift": False, "noise": "white", "gain": False}}
+    model = ModalModel(table, vi.series(t, y))
+    (start,) = model.guesses(model.default_priors())
+    lo, hi = model.default_priors()["lines[0].frequency"].bounds
+    assert lo <= start["lines[0].frequency"] <= hi
+    assert start["lines[0].frequency"] == pytest.approx(f, rel=0.15)
+    fitted = vi.fit(vi.series(t, y), table, method="map").summary()["parameters"]["lines[0].frequency"]
+    assert fitted["q05"] < f * 1.1 and fitted["q95"] > f * 0.9
