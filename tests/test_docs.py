@@ -91,14 +91,14 @@ def test_the_oma_page_shows_the_table_of_its_bench_json():
     assert pages.oma_block(result) in pages.OMA_PAGE.read_text()
 
 
-def test_the_robustness_estimators_and_speed_pages_show_the_tables_of_their_bench_json():
-    """docs/validation/robustness.md, estimators.md and speed.md (its two tables): each table is the
+def test_the_robustness_estimators_speed_and_calibration_pages_show_the_tables_of_their_bench_json():
+    """docs/validation/robustness.md, estimators.md, speed.md (its two tables) and calibration.md: each table is the
     one its stored JSON beside the page gives (`update_pages.py` writes both, from the bench's own
     table function), the figure is there, and the page states the command that reproduces it."""
     import json
 
     pages = _update_pages()
-    assert {b.name for b in pages.BLOCKS} == {"robustness", "estimators", "speed", "imaging"}
+    assert {b.name for b in pages.BLOCKS} == {"robustness", "estimators", "speed", "imaging", "calibration"}
     for block in pages.BLOCKS:
         text = block.stored.read_text()
         assert "/work/" not in text and "/home/" not in text, block.name  # no machine's directories

@@ -7,6 +7,7 @@ no number on them is typed by hand. Run the benches into one directory, then thi
     vibinverse bench --estimators --quick -o bench    # estimators.md
     vibinverse bench --quick -o bench                 # speed.md, its first table
     vibinverse bench --imaging --quick -o bench       # speed.md, its imaging table
+    vibinverse bench --calibration -o bench           # calibration.md (hours; --quick: a smoke test)
     python docs/validation/update_pages.py bench
 
 For every bench whose JSON is in the directory (the others are skipped, and said so, and their pages
@@ -171,6 +172,18 @@ def _imaging_stored(result: dict[str, Any]) -> dict[str, Any]:
     return {**result, "real_video": {**real, "skipped": reason}}
 
 
+def _calibration_run(result: dict[str, Any]) -> str:
+    st = result.get("settings", {})
+    limits = st.get("fit_limit_s")
+    limit = ", ".join(f"{v:g} s" for v in dict.fromkeys(limits.values())) if isinstance(limits, dict) else f"{limits} s"
+    sets_text = _bench("calibration_bench", "sets_text")
+    return (
+        f"This run: `vibinverse bench --calibration{' --quick' if st.get('quick') else ''}`, "
+        f"{sets_text(result)}, a fit limit of {limit}{_seconds(result)}. The cases:\n\n"
+        + "\n".join(f"- `{name}`: {what}" for name, what in st.get("cases", {}).items())
+    )
+
+
 @dataclass(frozen=True)
 class Block:
     """A measured block of a validation page: `source`, the JSON the bench writes (`command`), gives
@@ -255,6 +268,18 @@ BLOCKS = (
         _bench("imaging_bench", "plot"),
         _imaging_run,
         _imaging_stored,
+    ),
+    Block(
+        "calibration",
+        "calibration.json",
+        "vibinverse bench --calibration",
+        HERE / "calibration.md",
+        HERE / "calibration.json",
+        HERE / "calibration.png",
+        _bench("calibration_bench", "table"),
+        _bench("calibration_bench", "plot"),
+        _calibration_run,
+        _bench("calibration_bench", "without_records"),
     ),
 )
 
