@@ -10,11 +10,12 @@ the prior, an exact posterior's 90 % interval holds the truth in 90 % of them wh
 (a fixed truth, as in `bench --robustness`, need not), so coverage off 0.90 by more than its
 standard error here is the approximation's (or the sampler's) fault, not the prior's.
 
-2026-12-03, 160 draws: emcee (`mcmc`) 0.894, 0.919, 0.900 for frequency, damping ratio and RMS
-(se 0.024); MAP + Laplace (`map`) 0.875, 0.769, 0.819; the Laplace approximation importance-sampled
-(`importance`: 142 draws passed its PSIS check, 18 fell back to emcee) 0.894, 0.938, 0.912;
-2026-12-04, with more draws where the weights pass the Pareto check but are too few to count
-(`estimators.importance`): 159 by importance sampling, the same 0.894, 0.938, 0.912, 0.4 s a fit.
+By default it fits by MAP + Laplace (`map`) and by emcee (`mcmc`); `--methods` also takes the
+Laplace approximation importance-sampled (`importance`, which falls back to emcee where the weights
+fail their checks). It prints each method's coverage per parameter with its standard error. This
+script compares the methods on one prior; the measured coverage of the default fit, over the
+bench's simulated cases, comes from `vibinverse bench --calibration` and is kept in
+docs/validation/calibration.md.
 
     python examples/modal_calibration.py --methods importance,map   # ~5 min on 2 cores
 """
