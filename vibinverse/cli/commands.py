@@ -13,7 +13,7 @@ import argparse
 import contextlib
 import logging
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -498,12 +498,7 @@ def _bench_robustness_scene(args: argparse.Namespace, out: Path, js: Path) -> di
     from vibinverse.bench.robustness_bench import with_scene
     from vibinverse.bench.robustness_scene import SCENE_CASES, run, table
 
-    cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases is not None else None
-    for c in cases or []:
-        if c not in SCENE_CASES:
-            raise InputError(f"--cases: {c!r}; allowed: {', '.join(SCENE_CASES)}")
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"--workers: {args.workers}; allowed: 1 or more")
+    cases = _case_names(args, list(SCENE_CASES))
     txt, fits = out / SCENE_TABLE, out / SCENE_FITS
     _check_outputs({js.name: js, txt.name: txt, fits.name: fits}, {})
     with created(out):
@@ -531,21 +526,24 @@ def _bench_imaging(quick: bool) -> tuple[dict, Any]:
     return result, lambda p: plot(result, p)
 
 
-def _bench_realdata(args: argparse.Namespace, out: Path, js: Path) -> dict[str, Any]:
-    """--realdata: our tool on the measured recordings of the real-data corpus, each case run as a
-    user would and scored against its independent reference (`vibinverse.bench.realdata_bench`);
-    realdata.json (every claim), realdata.txt (the table), realdata.png."""
-    from vibinverse.bench.realdata_bench import plot, run, table
-    from vibinverse.bench.realdata_cases import load_cases, select
-
+def _case_names(args: argparse.Namespace, allowed: Sequence[str] | None = None) -> list[str] | None:
+    """--cases as a list (None: all), each checked against `allowed` when given, and --workers >= 1."""
     cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases is not None else None
-    select(load_cases(), cases)  # the corpus and the case names, checked before anything is written
+    for c in cases or []:
+        if allowed is not None and c not in allowed:
+            raise InputError(f"--cases: {c!r}; allowed: {', '.join(allowed)}")
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers: {args.workers}; allowed: 1 or more")
-    txt, png = out / "realdata.txt", out / "realdata.png"
+    return cases
+
+
+def _tabled_bench(out: Path, js: Path, compute: Any, table: Any, plot: Any) -> dict[str, Any]:
+    """A bench that writes its JSON, its table (STEM.txt) and its figure (STEM.png): `compute()`
+    runs it, `table(result)` and `plot(result, path)` render it; nothing is written before it ends."""
+    txt, png = js.with_suffix(".txt"), js.with_suffix(".png")
     _check_outputs({js.name: js, txt.name: txt, png.name: png}, {})
     with created(out):
-        result = run(quick=args.quick, cases=cases, workers=args.workers)
+        result = compute()
         text = table(result)
         logger.info(text)
         write_all(
@@ -557,6 +555,18 @@ def _bench_realdata(args: argparse.Namespace, out: Path, js: Path) -> dict[str, 
         )
     logger.info(f"wrote {js}, {txt} and {png}")
     return _result(result, [js, txt, png])
+
+
+def _bench_realdata(args: argparse.Namespace, out: Path, js: Path) -> dict[str, Any]:
+    """--realdata: our tool on the measured recordings of the real-data corpus, each case run as a
+    user would and scored against its independent reference (`vibinverse.bench.realdata_bench`);
+    realdata.json (every claim), realdata.txt (the table), realdata.png."""
+    from vibinverse.bench.realdata_bench import plot, run, table
+    from vibinverse.bench.realdata_cases import load_cases, select
+
+    cases = _case_names(args)
+    select(load_cases(), cases)  # the corpus and the case names, checked before anything is written
+    return _tabled_bench(out, js, lambda: run(quick=args.quick, cases=cases, workers=args.workers), table, plot)
 
 
 def _bench_calibration(args: argparse.Namespace, out: Path, js: Path) -> dict[str, Any]:
@@ -565,28 +575,9 @@ def _bench_calibration(args: argparse.Namespace, out: Path, js: Path) -> dict[st
     calibration.png."""
     from vibinverse.bench.calibration_bench import CALIBRATION_CASES, plot, run, table
 
-    cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases is not None else None
-    for c in cases or []:
-        if c not in CALIBRATION_CASES:
-            raise InputError(f"--cases: {c!r}; allowed: {', '.join(CALIBRATION_CASES)}")
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"--workers: {args.workers}; allowed: 1 or more")
-    txt, png = out / "calibration.txt", out / "calibration.png"
-    _check_outputs({js.name: js, txt.name: txt, png.name: png}, {})
-    with created(out):
-        workers = args.workers if args.workers is not None else min(2, os.cpu_count() or 1)
-        result = run(quick=args.quick, cases=cases, workers=workers)
-        text = table(result)
-        logger.info(text)
-        write_all(
-            {
-                js: lambda p: p.write_text(jsonio.dumps(result, indent=2)),
-                txt: lambda p: p.write_text(text + "\n"),
-                png: lambda p: plot(result, p),
-            }
-        )
-    logger.info(f"wrote {js}, {txt} and {png}")
-    return _result(result, [js, txt, png])
+    cases = _case_names(args, list(CALIBRATION_CASES))
+    workers = args.workers if args.workers is not None else min(2, os.cpu_count() or 1)
+    return _tabled_bench(out, js, lambda: run(quick=args.quick, cases=cases, workers=workers), table, plot)
 
 
 #: `vibinverse bench` modes: the flag that picks one (None: the default), its file stem, its runner
