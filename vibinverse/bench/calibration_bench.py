@@ -26,6 +26,7 @@ A case passes when its coverage lies within `BAND` (0.85-0.95).
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import time
@@ -167,10 +168,14 @@ def fit_set(name: str, seed: int, method: str = "auto") -> dict[str, Any]:
     return {"truth": truth, "estimates": estimates, "approximation": str(summary.get("approximation") or "emcee")}
 
 
-def _job(name: str, seed: int, limit_s: float, fit: Callable[[str, int], dict[str, Any]]) -> Job:
+def _job(name: str, seed: int, limit_s: float, fit: Callable[[str, int], dict[str, Any]], log: Path | None) -> Job:
     res: StepResult = yield Step("fit", fit, (name, seed), limit_s, f"{name} #{seed}")
     value = res.value or {}
-    return [{"case": name, "seed": seed, "status": res.status, "seconds": res.seconds, "error": res.error, **value}]
+    record = {"case": name, "seed": seed, "status": res.status, "seconds": res.seconds, "error": res.error, **value}
+    if log is not None:  # as each fit ends: a run stopped early keeps what it did
+        with open(log, "a") as fh:
+            fh.write(json.dumps(record) + "\n")
+    return [record]
 
 
 # ------------------------------------------------------------------------------------ the scores
@@ -240,11 +245,13 @@ def run(
     sets: int | None = None,
     limit_s: float | None = None,
     fit: Callable[[str, int], dict[str, Any]] = fit_set,
+    records: Path | None = None,
 ) -> dict[str, Any]:
     """Every data set of every case (default: all of `CALIBRATION_CASES`; `sets` per case, default
     SETS, QUICK_SETS with `quick`), `workers` fits at once, each within `limit_s` (default
     FIT_LIMIT_S, QUICK_LIMIT_S with `quick`), after one untimed MAP fit in this process (the kernels
-    compiled once, not in every forked process). Returns
+    compiled once, not in every forked process). `records`: a JSON-lines file each fit's record
+    is appended to as it ends. Returns
     {"rows": `score`, "cases": `case_summary`, "records": every fit, "settings", "seconds"}."""
     names = list(cases) if cases is not None else list(CALIBRATION_CASES)
     for c in names:
@@ -257,7 +264,7 @@ def run(
     if fit is fit_set and names:  # compiled and imported once here, for every forked fit to inherit
         with quiet():  # a MAP: the kernels without the sampler (emcee takes minutes on 1/f noise)
             fit_set(names[0], n, method="map")
-    jobs = [_job(c, seed, limit_s, fit) for c in names for seed in range(n)]
+    jobs = [_job(c, seed, limit_s, fit, records) for c in names for seed in range(n)]
     records = [rec for rows in run_jobs(jobs, workers) for rec in rows]
     settings = {
         "quick": quick,

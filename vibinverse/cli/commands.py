@@ -537,11 +537,12 @@ def _case_names(args: argparse.Namespace, allowed: Sequence[str] | None = None) 
     return cases
 
 
-def _tabled_bench(out: Path, js: Path, compute: Any, table: Any, plot: Any) -> dict[str, Any]:
+def _tabled_bench(out: Path, js: Path, compute: Any, table: Any, plot: Any, log: Path | None = None) -> dict[str, Any]:
     """A bench that writes its JSON, its table (STEM.txt) and its figure (STEM.png): `compute()`
-    runs it, `table(result)` and `plot(result, path)` render it; nothing is written before it ends."""
+    runs it, `table(result)` and `plot(result, path)` render it, written when it ends; `log`, a
+    file `compute` appends to as it goes (checked and reported with the others)."""
     txt, png = js.with_suffix(".txt"), js.with_suffix(".png")
-    _check_outputs({js.name: js, txt.name: txt, png.name: png}, {})
+    _check_outputs({js.name: js, txt.name: txt, png.name: png, **({log.name: log} if log else {})}, {})
     with created(out):
         result = compute()
         text = table(result)
@@ -553,8 +554,8 @@ def _tabled_bench(out: Path, js: Path, compute: Any, table: Any, plot: Any) -> d
                 png: lambda p: plot(result, p),
             }
         )
-    logger.info(f"wrote {js}, {txt} and {png}")
-    return _result(result, [js, txt, png])
+    logger.info(f"wrote {js}, {txt} and {png}" + (f" (and {log})" if log else ""))
+    return _result(result, [js, txt, png, *([log] if log else [])])
 
 
 def _bench_realdata(args: argparse.Namespace, out: Path, js: Path) -> dict[str, Any]:
@@ -572,12 +573,18 @@ def _bench_realdata(args: argparse.Namespace, out: Path, js: Path) -> dict[str, 
 def _bench_calibration(args: argparse.Namespace, out: Path, js: Path) -> dict[str, Any]:
     """--calibration: coverage of the 90 % intervals over many simulated data sets per case
     (`vibinverse.bench.calibration_bench`); calibration.json (every fit), calibration.txt,
-    calibration.png."""
+    calibration.png, and calibration_fits.jsonl (each fit as it ends: a stopped run keeps them)."""
     from vibinverse.bench.calibration_bench import CALIBRATION_CASES, plot, run, table
 
     cases = _case_names(args, list(CALIBRATION_CASES))
     workers = args.workers if args.workers is not None else min(2, os.cpu_count() or 1)
-    return _tabled_bench(out, js, lambda: run(quick=args.quick, cases=cases, workers=workers), table, plot)
+    fits = out / "calibration_fits.jsonl"
+
+    def compute() -> dict[str, Any]:
+        fits.write_text("")  # this run's records only, each appended as its fit ends
+        return run(quick=args.quick, cases=cases, workers=workers, records=fits)
+
+    return _tabled_bench(out, js, compute, table, plot, log=fits)
 
 
 #: `vibinverse bench` modes: the flag that picks one (None: the default), its file stem, its runner
@@ -891,7 +898,7 @@ def build_parser() -> argparse.ArgumentParser:
         "with --robustness: robustness.json, robustness.png, with --scene robustness.json, robustness_scene.txt, "
         "robustness_scene_fits.jsonl; with --imaging: imaging.json, imaging.png; with --realdata: realdata.json, "
         "realdata.txt, realdata.png; with --oma: oma.json, oma.png; with --calibration: calibration.json, "
-        "calibration.txt, calibration.png)",
+        "calibration.txt, calibration.png, calibration_fits.jsonl)",
     )
     which = bench.add_mutually_exclusive_group()
     which.add_argument(

@@ -2,6 +2,7 @@
 through processes (an answer, an error, a timeout), the CLI's refusals, and (slow) a coverage check
 on enough data sets to fail intervals 20 % too narrow."""
 
+import json
 import math
 import time
 
@@ -80,7 +81,12 @@ def _fake_fit(name: str, seed: int) -> dict:
 
 
 def test_run_scores_the_answers_and_counts_errors_and_timeouts(tmp_path):
-    result = cb.run(cases=["few_cycles"], sets=4, workers=2, limit_s=3.0, fit=_fake_fit)
+    log = tmp_path / "fits.jsonl"
+    result = cb.run(cases=["few_cycles"], sets=4, workers=2, limit_s=3.0, fit=_fake_fit, records=log)
+    kept = [json.loads(line) for line in log.read_text().splitlines()]
+    assert sorted(r["seed"] for r in kept) == [0, 1, 2, 3] and sorted(kept, key=lambda r: r["seed"]) == sorted(
+        result["records"], key=lambda r: r["seed"]
+    )
     (case,) = result["cases"]
     assert (case["answered"], case["errors"], case["timeouts"]) == (2, 1, 1)
     assert case["first_error"] == "ValueError: no finite likelihood" and case["posterior"] == {"laplace": 2}
