@@ -1143,7 +1143,7 @@ class ModalModel(SignalModel):
         for assign in assignments:
             g = dict(base)
             line_f = sorted(picked[i] for i in assign[: s.lines])
-            mode_f = sorted(picked[i] for i in assign[s.lines :])
+            mode_f = sorted(max(picked[i], lo) for i in assign[s.lines :])  # the first bin lies under the prior
             for i, f in enumerate(mode_f):
                 zeta, rms = mode_start(freqs, power, f, n, floor)
                 g[f"modes[{i}].frequency"], g[f"modes[{i}].damping_ratio"], g[f"modes[{i}].rms"] = f, zeta, rms
