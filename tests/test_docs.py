@@ -92,21 +92,61 @@ def test_the_oma_page_shows_the_table_of_its_bench_json():
 
 
 def test_the_robustness_estimators_speed_and_calibration_pages_show_the_tables_of_their_bench_json():
-    """docs/validation/robustness.md, estimators.md, speed.md (its two tables) and calibration.md: each table is the
-    one its stored JSON beside the page gives (`update_pages.py` writes both, from the bench's own
-    table function), the figure is there, and the page states the command that reproduces it."""
+    """docs/validation/robustness.md, estimators.md, speed.md (its two tables), calibration.md and
+    oma.md's two calibration tables (from examples/oma_calibration.py's and io_calibration.py's JSON):
+    each table is the one its stored JSON beside the page gives (`update_pages.py` writes both, from
+    the bench's own table function), the figure is there where the block has one, and the page
+    states the command that reproduces it."""
     import json
 
     pages = _update_pages()
-    assert {b.name for b in pages.BLOCKS} == {"robustness", "estimators", "speed", "imaging", "calibration"}
+    assert {b.name for b in pages.BLOCKS} == {
+        "robustness",
+        "estimators",
+        "speed",
+        "imaging",
+        "calibration",
+        "oma calibration",
+        "io calibration",
+    }
     for block in pages.BLOCKS:
         text = block.stored.read_text()
         assert "/work/" not in text and "/home/" not in text, block.name  # no machine's directories
         page = block.page.read_text()
         assert block.block(json.loads(text)) in page, block.name
-        assert block.figure.is_file() and block.figure.stat().st_size > 10_000, block.figure
-        assert f"]({block.figure.name})" in page, block.name
+        if block.figure is not None:
+            assert block.figure.is_file() and block.figure.stat().st_size > 10_000, block.figure
+            assert f"]({block.figure.name})" in page, block.name
         assert block.command in page and "update_pages.py" in page, block.name
+
+
+def test_the_oma_calibration_tables_count_what_their_json_holds():
+    """oma.md's calibration tables: one row per case of oma_calibration.json and per noise level and
+    mode of io_calibration.json, Markdown (not a code block), each coverage with its standard error;
+    the caption names the run's command with its settings."""
+    import json
+
+    pages = _update_pages()
+    blocks = {b.name: b for b in pages.BLOCKS}
+    oma = json.loads(blocks["oma calibration"].stored.read_text())
+    text = blocks["oma calibration"].block(oma)
+    assert "```" not in text and text.count("±") == 3 * len(oma["cases"])
+    for r in oma["cases"]:
+        assert f"| {r['case']} (" in text and r["what"] in text
+        assert f"{r['frequency']['coverage']:.3f} ± {r['frequency']['se']:.3f}" in text
+        assert r["frequency"]["n"] <= r["modes"] * (r["n_sets"] - r["failed"])  # a missed mode: no interval
+    settings = oma["settings"]
+    assert f"oma_calibration.py {settings['n_sets']} {' '.join(settings['cases'])}" in text
+    io = json.loads(blocks["io calibration"].stored.read_text())
+    text = blocks["io calibration"].block(io)
+    rows = [line for line in text.splitlines() if line.startswith("| ") and "% of each channel" in line]
+    assert len(rows) == sum(len(level["modes"]) for level in io["levels"]) and len(io["levels"]) >= 2
+    for level in io["levels"]:
+        for m in level["modes"]:
+            assert m["found"] + m["missed"] == io["sets"]
+            assert f"{m['coverage_damping_ratio']:.3f} ± {m['coverage_damping_ratio_se']:.3f}" in text
+    noises = " ".join(f"{level['noise']:g}" for level in io["levels"])
+    assert f"io_calibration.py {io['sets']} {io['fs']:g} {noises}" in text
 
 
 def test_update_pages_regenerates_what_is_there_and_skips_the_rest(tmp_path, monkeypatch):
@@ -133,3 +173,25 @@ def test_update_pages_regenerates_what_is_there_and_skips_the_rest(tmp_path, mon
     assert pages.main(bench) == ["estimators.json"]
     result = json.loads((tmp_path / "kept.json").read_text())
     assert page.read_text() == f"before\n{block.block(result)}\nafter\n"
+
+
+def test_update_pages_writes_a_table_without_a_figure(tmp_path, monkeypatch):
+    """A block without a figure (oma.md's io calibration table): update_pages.py splices its table and
+    stores its JSON, and plots nothing."""
+    import dataclasses
+    import json
+
+    pages = _update_pages()
+    block = next(b for b in pages.BLOCKS if b.name == "io calibration")
+    assert block.figure is None and block.plot is None
+    page = tmp_path / "oma.md"
+    page.write_text(f"before\n{block.begin}\nold\n{block.end}\nafter\n")
+    moved = dataclasses.replace(block, page=page, stored=tmp_path / "kept.json")
+    monkeypatch.setattr(pages, "BLOCKS", (moved,))
+    bench = tmp_path / "bench"
+    bench.mkdir()
+    (bench / "io_calibration.json").write_text(block.stored.read_text())
+    assert pages.main(bench) == ["io_calibration.json"]
+    result = json.loads((tmp_path / "kept.json").read_text())
+    assert page.read_text() == f"before\n{block.block(result)}\nafter\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bench", "kept.json", "oma.md"]

@@ -8,15 +8,19 @@ no number on them is typed by hand. Run the benches into one directory, then thi
     vibinverse bench --quick -o bench                 # speed.md, its first table
     vibinverse bench --imaging --quick -o bench       # speed.md, its imaging table
     vibinverse bench --calibration -o bench           # calibration.md (hours; --quick: a smoke test)
+    # oma.md's calibration tables (the examples' JSON):
+    python examples/oma_calibration.py 50 three_storey close_pair --quick -o bench/oma_calibration.json
+    python examples/io_calibration.py 50 200 0.05 1.0 -o bench/io_calibration.json
     python docs/validation/update_pages.py bench
 
 For every bench whose JSON is in the directory (the others are skipped, and said so, and their pages
 left as they are) it writes a copy of the JSON beside its page (machine paths made relative; the
-robustness bench's per-fit records left out, as its table does not use them), the bench's figure,
-and the page's table between its two markers (`<!-- NAME table: update_pages.py -->` and
+robustness bench's per-fit records left out, as its table does not use them), the bench's figure (if
+it has one), and the page's table between its two markers (`<!-- NAME table: update_pages.py -->` and
 `<!-- end of the NAME table -->`), made by the bench's own table function (`BLOCKS`; realdata.md
-and oma.md by `update_realdata` and `update_oma`). tests/test_docs.py checks that each page's table
-is the one its stored JSON gives."""
+and oma.md's first table by `update_realdata` and `update_oma`; oma.md's calibration tables, from
+the two examples' JSON, as Markdown by `oma_calibration_table` and `io_calibration_table`).
+tests/test_docs.py checks that each page's table is the one its stored JSON gives."""
 
 from __future__ import annotations
 
@@ -184,23 +188,132 @@ def _calibration_run(result: dict[str, Any]) -> str:
     )
 
 
+# ---- oma.md's calibration tables: from the JSON of examples/oma_calibration.py and io_calibration.py
+
+
+def _cov(entry: dict[str, Any] | None, key: str = "coverage", se: str = "se") -> str:
+    """`coverage ± se` of a coverage entry (3 decimals), "-" where nothing was counted."""
+    if not entry or entry.get(key) is None:
+        return "-"
+    return f"{entry[key]:.3f} ± {entry[se]:.3f}"
+
+
+def _fraction(x: float | None) -> str:
+    return "-" if x is None else f"{x:.3f}"
+
+
+def _span(seconds: float) -> str:
+    return f"{seconds / 60:g} min" if seconds % 60 == 0 else f"{seconds:g} s"
+
+
+def _oma_case(r: dict[str, Any]) -> str:
+    return f"{r['case']} ({r['modes']} modes, {r['channels']} channels, {_span(r['duration'])} at {r['fs']:g} Hz)"
+
+
+def oma_calibration_table(result: dict[str, Any]) -> str:
+    """Per case of examples/oma_calibration.py's JSON: the data sets (failed fits), the fraction of
+    true modes found, the intervals counted (f / ζ / shape components) and the 90 % intervals'
+    coverage ± its binomial standard error, as a Markdown table."""
+    lines = [
+        "| case | data sets (failed) | modes found | intervals (f / ζ / shape) | f | ζ | shape components |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in result["cases"]:
+        f, z, sh = r["frequency"], r["damping_ratio"], r["shape"]
+        lines.append(
+            f"| {_oma_case(r)} | {r['n_sets']} ({r['failed']}) | {_fraction(r['found'])} "
+            f"| {f['n']} / {z['n']} / {sh['n']} | {_cov(f)} | {_cov(z)} | {_cov(sh)} |"
+        )
+    return "\n".join(lines)
+
+
+def _oma_calibration_run(result: dict[str, Any]) -> str:
+    st = result.get("settings", {})
+    cases = result.get("cases", [])
+    quick = " --quick" if st.get("quick") else ""
+    command = f"python examples/oma_calibration.py {st.get('n_sets', '?')} {' '.join(st.get('cases', []))}{quick}"
+    every = all(r.get("found") == 1 and r.get("failed") == 0 for r in cases)
+    without = []  # matched modes reported without an interval of f: not counted
+    for r in cases:
+        matched = round((r["found"] or 0.0) * r["modes"] * (r["n_sets"] - r["failed"]))
+        if matched > r["frequency"]["n"]:
+            without.append(f"{matched - r['frequency']['n']} of the {matched} on {r['case']}")
+    no_interval = (
+        f" Matched modes reported without an interval (the posterior not locally Gaussian) are not counted: "
+        f"{', '.join(without)}."
+        if without
+        else ""
+    )
+    return (
+        f"This run: `{command} -o bench/oma_calibration.json`, {st.get('n_sets', '?')} data sets per case"
+        f"{' on the quick records' if st.get('quick') else ''}{_seconds(result)}. "
+        f"{'Every true mode was found in every data set.' if every else 'Not every true mode was found.'}"
+        f"{no_interval} The cases:\n\n" + "\n".join(f"- `{r['case']}`: {r['what']}" for r in cases)
+    )
+
+
+def io_calibration_table(result: dict[str, Any]) -> str:
+    """Per noise level and mode of examples/io_calibration.py's JSON: the records, the records where
+    the mode was found (the intervals counted) and where it had no interval (counted as missing the
+    truth), the 90 % intervals' coverage of f and ζ ± its binomial standard error, and the z-scores'
+    mean (sd), as a Markdown table."""
+    lines = [
+        "| sensor noise | mode | records | found (intervals) | without interval | f | ζ | z of f: mean (sd) "
+        "| z of ζ: mean (sd) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def z(m: dict[str, Any], name: str) -> str:
+        mean, sd = m.get(f"z_{name}_mean"), m.get(f"z_{name}_sd")
+        return "-" if mean is None else f"{mean:+.2f} ({sd:.2f})"
+
+    for level in result["levels"]:
+        noise = f"{100 * level['noise']:g} % of each channel's sd"
+        for m in level["modes"]:
+            mode = f"{m['frequency']:g} Hz, ζ {m['damping_ratio']:g}"
+            cov_f = _cov(m, "coverage_frequency", "coverage_frequency_se")
+            cov_z = _cov(m, "coverage_damping_ratio", "coverage_damping_ratio_se")
+            lines.append(
+                f"| {noise} | {mode} | {m['found'] + m['missed']} | {m['found']} | {m['no_interval']} "
+                f"| {cov_f} | {cov_z} | {z(m, 'frequency')} | {z(m, 'damping_ratio')} |"
+            )
+    return "\n".join(lines)
+
+
+def _io_calibration_run(result: dict[str, Any]) -> str:
+    noises = " ".join(f"{level['noise']:g}" for level in result.get("levels", []))
+    n, fs = result.get("sets", "?"), result.get("fs", 0.0)
+    band = "-".join(f"{b:g}" for b in result.get("band", []))
+    true_modes = result.get("true_modes", [])
+    modes = "; ".join(f"{m['frequency']:g} Hz, ζ {m['damping_ratio']:g}" for m in true_modes)
+    return (
+        f"This run: `python examples/io_calibration.py {n} {fs:g} {noises} -o bench/io_calibration.json`, "
+        f"{n} records of {result.get('duration', 0.0):g} s at {fs:g} Hz per noise level (the same seeds at each), "
+        f"{len(true_modes)} modes ({modes}) on {result.get('channels', '?')} channels, analysis band {band} Hz"
+        f"{_seconds(result)}."
+    )
+
+
 @dataclass(frozen=True)
 class Block:
     """A measured block of a validation page: `source`, the JSON the bench writes (`command`), gives
     `table(result)` between the markers `<!-- NAME table: update_pages.py -->` and `<!-- end of the
     NAME table -->` of `page`, under the sentence `caption(result)` says of the run; `stored` (the
-    JSON as kept beside the page, `keep(result)`) and `figure` (`plot(result, path)`) beside it."""
+    JSON as kept beside the page, `keep(result)`) and `figure` (`plot(result, path)`; None for a table
+    without a figure) beside it; the table is fixed-width text in a code block, or Markdown
+    (`markdown`) set as it is."""
 
     name: str
     source: str
     command: str
     page: Path
     stored: Path
-    figure: Path
+    figure: Path | None
     table: Callable[[dict[str, Any]], str]
-    plot: Callable[[dict[str, Any], Path], None]
+    plot: Callable[[dict[str, Any], Path], None] | None
     caption: Callable[[dict[str, Any]], str]
     keep: Callable[[dict[str, Any]], dict[str, Any]] = lambda result: result
+    markdown: bool = False
 
     @property
     def begin(self) -> str:
@@ -212,14 +325,16 @@ class Block:
 
     def block(self, result: dict[str, Any]) -> str:
         """The page's block made from `result` (the stored JSON): markers, the run's sentence, the table."""
-        return f"{self.begin}\n{self.caption(result)}\n\n```\n{self.table(result)}\n```\n{self.end}"
+        table = self.table(result) if self.markdown else f"```\n{self.table(result)}\n```"
+        return f"{self.begin}\n{self.caption(result)}\n\n{table}\n{self.end}"
 
     def update(self, bench_dir: Path) -> None:
-        """The stored JSON, the figure and the page's table from bench_dir/`source`."""
+        """The stored JSON, the figure (if any) and the page's table from bench_dir/`source`."""
         result = self.keep(json.loads((bench_dir / self.source).read_text()))
         splice(self.page, self.begin, self.end, self.block(result))
         self.stored.write_text(json.dumps(result, indent=1) + "\n")
-        self.plot(result, self.figure)
+        if self.plot is not None and self.figure is not None:
+            self.plot(result, self.figure)
 
 
 BLOCKS = (
@@ -280,6 +395,30 @@ BLOCKS = (
         _bench("calibration_bench", "plot"),
         _calibration_run,
         _bench("calibration_bench", "without_records"),
+    ),
+    Block(
+        "oma calibration",
+        "oma_calibration.json",
+        "python examples/oma_calibration.py",
+        OMA_PAGE,
+        HERE / "oma_calibration.json",
+        None,
+        oma_calibration_table,
+        None,
+        _oma_calibration_run,
+        markdown=True,
+    ),
+    Block(
+        "io calibration",
+        "io_calibration.json",
+        "python examples/io_calibration.py",
+        OMA_PAGE,
+        HERE / "io_calibration.json",
+        None,
+        io_calibration_table,
+        None,
+        _io_calibration_run,
+        markdown=True,
     ),
 )
 
