@@ -395,6 +395,22 @@ def spectral_peaks(
     return out
 
 
+def background(freqs: np.ndarray, power: np.ndarray, reach: float = 0.5) -> np.ndarray:
+    """The power's smooth background at each frequency f: the median of the raw power over
+    f (1 +- reach), at the first 20 bins and on log-spaced nodes (10 per octave) after, interpolated
+    in ln f. The window's width grows with f, so it follows a drift's or a coloured noise's power
+    law and knee, which a window of fixed width smears; being symmetric in f, its median is the
+    curve's value at f wherever the curve is monotone. A resonance or a line, a few bins in a window
+    of many, stands above it."""
+    f0, f1 = float(freqs[0]), float(freqs[-1])
+    nodes = np.exp(np.linspace(math.log(f0), math.log(f1), max(2, math.ceil(10 * math.log2(f1 / f0)) + 1)))
+    nodes = np.union1d(freqs[:20], nodes)  # the first bins themselves, whose windows hold few bins
+    lo = np.searchsorted(freqs, nodes * (1.0 - reach), "left")
+    hi = np.maximum(np.searchsorted(freqs, nodes * (1.0 + reach), "right"), lo + 1)
+    med = np.array([np.median(power[a:b]) for a, b in zip(lo, hi)])
+    return np.exp(np.interp(np.log(freqs), np.log(nodes), np.log(np.maximum(med, 1e-300))))
+
+
 def line_windows(raw: Any) -> tuple[tuple[float, float], ...]:
     """The `modal.windows` of a table as ((lo, hi), ...) in Hz; a one-line SceneError naming the
     key unless each is a pair of finite numbers 0 <= lo < hi."""
@@ -1114,7 +1130,10 @@ class ModalModel(SignalModel):
         width = max(3, round(0.002 * freqs.size) | 1)
         # from the first Fourier bin (1 / (N dt): a cycle in N dt, just under one in the span (N - 1) dt)
         first = min(lo, float(freqs[0]))
-        peaks = spectral_peaks(freqs, power, (first, nyq * 0.999), width, separation=3 * width * (freqs[1] - freqs[0]))
+        # a drift, a gain drift or a coloured noise puts its power at low frequencies, the first
+        # bin's above all: the peaks are searched over its background there (`background`)
+        ranked = power / background(freqs, power) if s.drifting or s.coloured or s.gain else power
+        peaks = spectral_peaks(freqs, ranked, (first, nyq * 0.999), width, separation=3 * width * (freqs[1] - freqs[0]))
         need = s.modes + s.lines
         while len(peaks) < need:  # fewer peaks than components: spread the rest over the band
             peaks.append((lo + (nyq - lo) * (len(peaks) + 1) / (need + 1), 1.0))
