@@ -15,3 +15,14 @@ def test_every_package_directory_is_listed_in_pyproject():
     }
     assert found - listed == set(), f"not shipped: {sorted(found - listed)}"
     assert "vibinverse.scenes" in listed  # examples/scenes, mapped in as package data
+
+
+def test_ci_fails_a_test_skipped_for_a_reason_it_does_not_allow(tmp_path):
+    """Under VIBINVERSE_NO_SKIPS=1 (.ci/run) a skip for a missing package or recording fails the run;
+    the allowed platform reason does not, and without the variable nothing changes."""
+    from tests.conftest import unexpected_skip
+
+    assert unexpected_skip("pyOMA2 is not installed", {"VIBINVERSE_NO_SKIPS": "1"})
+    assert not unexpected_skip("this FFmpeg build has no h264 encoder", {"VIBINVERSE_NO_SKIPS": "1"})
+    assert not unexpected_skip("pyOMA2 is not installed", {})
+    assert "VIBINVERSE_NO_SKIPS=1" in (Path(__file__).resolve().parents[1] / ".ci" / "run").read_text()

