@@ -589,6 +589,7 @@ def pixels_figure(summary: dict, where: Path) -> tuple[str, str, str] | None:
     if ys.size == 0 or ys.shape != xs.shape or any(ys.shape != g.shape for g in gains) or ys.min() < 0 or xs.min() < 0:
         return None
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     detection = _detection_map(summary["data"].get("pixel_selection"), where)
     shape = detection["peak_snr"].shape if detection is not None else (int(ys.max()) + 1, int(xs.max()) + 1)
@@ -601,11 +602,13 @@ def pixels_figure(summary: dict, where: Path) -> tuple[str, str, str] | None:
         maps.append(gain_map)
     mask = np.isfinite(maps[0])
     # the gain panels show the fitted pixels' bounding box with a margin, not the whole frame (a
-    # cluster of a few pixels in a large frame would be a speck in an empty panel); neither side
-    # under a third of the other (a row of pixels stays a readable strip)
+    # cluster of a few pixels in a large frame would be a speck in an empty panel); a box more than
+    # three times longer than wide (a row of pixels) is stretched to fill the panel (pixels drawn as
+    # bars, the axes say so) rather than drawn as a thin strip in an empty frame
     edges = np.array([[ys.min(), ys.max()], [xs.min(), xs.max()]], dtype=float) + [-0.5, 0.5]
     span = edges[:, 1] - edges[:, 0]
-    half = np.maximum(span / 2 + np.maximum(1.0, np.ceil(0.1 * span)), span.max() / 6)
+    stretched = bool(span.max() > 3 * span.min())
+    half = span / 2 + (np.maximum(1.0, np.ceil(0.1 * span)) if not stretched else 0.0)
     box = np.stack([edges.mean(axis=1) - half, edges.mean(axis=1) + half], axis=1)
     first = 1 if detection is not None else 0
     panels = first + len(maps)
@@ -623,7 +626,9 @@ def pixels_figure(summary: dict, where: Path) -> tuple[str, str, str] | None:
     for j, (g, gain_map) in enumerate(zip(gains, maps)):
         ax = axes[0, first + j]
         top = float(np.nanmax(np.abs(g))) or 1.0
-        im = ax.imshow(gain_map, cmap="RdBu_r", vmin=-top, vmax=top, origin="upper")
+        im = ax.imshow(
+            gain_map, cmap="RdBu_r", vmin=-top, vmax=top, origin="upper", aspect="auto" if stretched else "equal"
+        )
         ax.set_xlim(box[1, 0], box[1, 1])
         ax.set_ylim(box[0, 1], box[0, 0])  # origin upper: y grows downwards
         fig.colorbar(im, ax=ax, label="gain (relative)")
@@ -631,7 +636,9 @@ def pixels_figure(summary: dict, where: Path) -> tuple[str, str, str] | None:
         if len(maps) > 1:
             kind = kinds[j] if j < len(kinds) else "source"
             title = f"source {j} ({kind}): gain and sign"
-        ax.set(title=title, xlabel="x (pixel)", ylabel="y (pixel)")
+        ax.set(title=title, xlabel="x (pixel)", ylabel="y (pixel)" + (" (stretched)" if stretched else ""))
+        for axis in (ax.xaxis, ax.yaxis):  # pixel rows and columns: whole numbers
+            axis.set_major_locator(MaxNLocator(integer=True))
     n = summary["diagnostics"].get("n_pixels", ys.size)
     snr = summary["diagnostics"].get("effective_snr_gain")
     snr_text = (

@@ -7,6 +7,7 @@ the approximation, the residual checks and the false-alarm probabilities), so th
 and the browser test (`test_report_browser.py`) do not depend on an estimator's run.
 """
 
+import io
 import json
 import math
 import re
@@ -546,3 +547,27 @@ def test_the_report_names_the_chosen_terms_and_why():
     assert "Model terms" in html and "<b>AR(1) noise, white noise</b>" in html
     assert "-373.3" in html and "+8.3" in html and html.count("kept") >= 2
     assert terms_html({"diagnostics": {}, "data": {}}) == ""
+
+
+@pytest.mark.parametrize("rows, cols", [(1, 64), (8, 8), (3, 40)])
+def test_the_gain_map_of_a_row_of_pixels_fills_its_panel(rows, cols):
+    """The joint pixel fit's gain-and-sign map: a row of pixels was drawn as a thin strip inside an
+    empty frame (issue 45); a long box is stretched to fill its panel, a square one drawn square.
+    The saturated red and blue of the gains cover a good part of the figure either way."""
+    import base64
+    from pathlib import Path
+
+    from PIL import Image
+
+    from vibinverse.report import pixels_figure
+
+    ys, xs = np.divmod(np.arange(rows * cols), cols)
+    gains = np.where((ys + xs) % 2 == 0, 1.0, -1.0)
+    summary = {
+        "data": {"pixels": {"y": ys.tolist(), "x": xs.tolist(), "gain": gains.tolist()}},
+        "diagnostics": {"n_pixels": rows * cols, "effective_snr_gain": 5.0},
+    }
+    title, png, _ = pixels_figure(summary, Path("."))
+    rgb = np.asarray(Image.open(io.BytesIO(base64.b64decode(png.split(",", 1)[1]))).convert("RGB"), dtype=float)
+    saturated = (np.abs(rgb[..., 0] - rgb[..., 2]) > 60).mean()  # red or blue, not grey or white
+    assert title == "Pixels" and saturated > 0.25, saturated

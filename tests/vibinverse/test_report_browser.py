@@ -3,7 +3,8 @@ it loads from a file:// URL with no console error and no request that fails or l
 every figure decodes, the verdict is the first block and sits within the first screen on a phone
 (390 x 844) and on a desktop (1280 x 800), the body never scrolls sideways, the parameter table
 fits its box at both widths (no sideways scroll of its own: columns that wrap on the desktop, one
-card per parameter on the phone), and a screenshot shows the verdict box where the layout puts it.
+card per parameter on the phone), every figure is shown at a readable width, and a screenshot shows
+the verdict box where the layout puts it; on the demo's kind of report and on a joint pixel fit's.
 A crafted result's markup runs nothing."""
 
 import io
@@ -91,6 +92,8 @@ def check_page(browser, path, device, screenshot, n_images=None):
             "Array.from(document.images, i => [i.complete, i.naturalWidth, i.getBoundingClientRect().width])"
         )
         assert images and all(done and natural > 0 and shown <= w for done, natural, shown in images), images
+        # every figure readable at its size: at least half the phone's width, 300 px on a desktop
+        assert all(shown >= min(0.5 * w, 300) for _, _, shown in images), images
         assert n_images is None or len(images) == n_images
         assert page.evaluate("document.body.firstElementChild.id") == "verdict"
         box = page.locator("#verdict").bounding_box()
@@ -142,6 +145,28 @@ def check_page(browser, path, device, screenshot, n_images=None):
 def test_report_in_a_browser(browser, report, device, tmp_path):
     numbers = check_page(browser, report, device, tmp_path / f"report-{device}.png", n_images=6)
     assert numbers["trust"] == "yes"
+
+
+@pytest.fixture(scope="module")
+def pixel_report(tmp_path_factory):
+    """The report of a joint fit of 64 pixels of one line, their gains a checkerboard of signs."""
+    from tests.vibinverse.imaging.test_joint_fit import LINE, T, checkerboard, cube, line
+    from vibinverse.imaging.joint_fit import fit_pixels
+    from vibinverse.report import write_report
+
+    rng = np.random.default_rng(6)
+    y = 50.0 + np.outer(line(), checkerboard(64)) + rng.normal(0, 2.0, (T, 64))
+    d = tmp_path_factory.mktemp("pixels")
+    result = fit_pixels(cube(y), "all", LINE, method="map")
+    return write_report(result.to_netcdf(d / "result.nc"), d)
+
+
+@pytest.mark.parametrize("device", list(VIEWPORTS))
+def test_a_joint_pixel_fit_report_in_a_browser(browser, pixel_report, device, tmp_path):
+    """The same checks on a joint pixel fit's report, whose gain-and-sign map was once drawn a few
+    pixels wide inside an empty frame."""
+    assert "<h2>Pixels</h2><img" in pixel_report.read_text()  # the gain-and-sign map
+    check_page(browser, pixel_report, device, tmp_path / f"pixels-{device}.png")
 
 
 @pytest.mark.slow
