@@ -46,6 +46,26 @@ def test_score_counts_the_intervals_that_hold_the_truth_and_what_20_percent_narr
     assert (case["sets"], case["answered"], case["timeouts"], case["errors"]) == (5, 4, 1, 0)
 
 
+def test_far_readings_are_counted_apart_among_the_fits_that_claim_their_component():
+    """`far|cl`: a line read 10 sds off counts as a broken promise only where the fit called the
+    line detected; records without detection flags give None (older runs)."""
+
+    def rec(truth, mean, detected):
+        r = _record("x", truth, (mean - 1.6, mean + 1.6), mean=mean, sd=1.0)
+        r["truth"] = {"lines[0].frequency": truth}
+        r["estimates"] = {"lines[0].frequency": r["estimates"].pop("a")}
+        if detected is not None:
+            r["detected"] = {"line_0": detected, "mode_0": True}
+        return r
+
+    (row,) = cb.score([rec(0.0, 10.0, False), rec(0.0, 0.5, True), rec(0.0, 0.2, True), rec(0.0, 12.0, True)])
+    assert row["far"] == 0.5 and row["claimed"] == 0.75 and row["far_claimed"] == pytest.approx(1 / 3)
+    (old,) = cb.score([rec(0.0, 10.0, None)])
+    assert old["far"] == 1.0 and old["claimed"] is None and old["far_claimed"] is None
+    assert cb.detection_label("modes[2].rms") == "mode_2" and cb.detection_label("noise.sigma") is None
+    assert "far|cl" in cb.table({"rows": [row, old], "cases": []})
+
+
 def test_each_case_draws_its_truth_in_its_ranges_and_fits_the_true_order():
     for name, cal in cb.CALIBRATION_CASES.items():
         modes, lines = cal.base.analyst_order()
