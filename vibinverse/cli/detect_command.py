@@ -167,9 +167,10 @@ def cmd_detect(args: argparse.Namespace) -> dict[str, Any]:
             where += f" and {len(rest)} more ({sum(c.n_pixels for c in rest)} px)"
         what = "" if line.claimed else f" [{line.kind}: not claimed as vibration; {line.reason}]"
         alias = f" (or {line.alias_frequency:.6g} Hz if aliased)" if math.isfinite(line.alias_frequency) else ""
+        note = f" ({line.note})" if line.note else ""
         logger.info(
             f"line {line.index}: {line.frequency:.6g} Hz{alias}, SNR {line.snr:.3g}, false-alarm probability "
-            f"{line.false_alarm_probability:.2g}: {where}{what}"
+            f"{line.false_alarm_probability:.2g}: {where}{what}{note}"
         )
     if not result.lines:
         logger.info(f"no line with false-alarm probability < {args.alpha:g}")

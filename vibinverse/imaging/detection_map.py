@@ -34,6 +34,13 @@ pixels that carry any line, numbered 1, 2, ... by decreasing peak SNR; `cluster`
 number (0: none), `line_of_cluster` the cluster's strongest line, `cluster_lines` every line it
 carries (a roof's pixels carry its tilt resonance and its drive together).
 
+A pixel whose value changes in fewer than `MIN_CHANGES` frames (a codec holds it; a few spikes) has
+too few events for its periodogram to be a noise's: its z is a deterministic pattern (two spikes a
+frame apart leave no power near Nyquist) that the whitening cannot judge. Its z is 0 for the
+peaks, the lines' maxima and the SNR maps (it carries no line); the counts of the recording's null
+and of the frame-wide check keep it, as the frame's (on the three tuning-fork videos at 250 fps
+shuffled in time, such pixels made claimed lines at 6-8 cycles per record in 6 of 60 orders).
+
 Real recordings: every p-value above (a line's, a pixel's) is the larger of the white-noise one and
 the recording's own (`empirical_null`: the pooled whitened powers away from the candidate lines,
 and the exponential tail of the per-frequency maxima over the pixels), gathered in the first pass
@@ -42,24 +49,33 @@ classified (`line_checks`): "vibration" (claimed), or real power of the recordin
 structure's (frame-wide, frame-pattern, unlocated, scattered), reported with the reason; and its
 other reading, fs - f (a line above Nyquist shows below it).
 
-Not searched: the first `LOW_BINS` Fourier frequencies (periods longer than a quarter of the
-record), where drifts and their leakage live. A rolling shutter's per-row time offset
-(coord "row_offset") shifts a row's stamps by a constant: it changes each periodogram's phase,
-never its power, and is ignored here.
+Slow lines: the first `LOW_BINS` Fourier frequencies (1-4 cycles per record, periods longer than
+a quarter of it), where drifts and illumination live, are searched apart (`slow_lines`): each
+pixel's coefficients there (kept from the first pass, LOW_BINS complex numbers and two white
+floors a pixel), less its share of the picture's common light change, over its white floors,
+against the bulk of the frame's pixels at the same bin, never pooled with the other frequencies'
+null. A slow line passes at `alpha` over the pixels and the slow bins (a family of its own); its
+frequency is its bin's, its note (`line_checks.Slow`) says so and that any slow change of a region
+looks alike; the other checks see whether the whole picture, the camera's motion, a region's light
+or clipped pixels make it. A rolling shutter's per-row time offset (coord "row_offset") shifts a
+row's stamps by a constant: it changes each periodogram's phase, never its power, and is ignored
+here.
 
 Decoded frames (video, MRAW, TIFF: integer counts read in pieces of whole frames, too big to keep)
 are decoded once into a scratch file per block (`spill`) on a local run, instead of once per block.
 
 Chunks: the time axis whole, the frame cut into spatial blocks so that the blocks in flight and
 their float64 work fit `memory` bytes less the kept spectra (`plan_chunks`), each of at most
-`BLOCK_BYTES`. A cube whose time axis is split in chunks (video frames, netCDF read by frames) is
-read block by block (each block's reads are its own tasks, so only its pixels are held), never
-rechunked whole. A second pass (spectra not kept) reads the frames again in slabs (`SLAB_BYTES`,
-whole frames: the cheapest reads) and adds up the DFT sums of each slab. Integer counts (decoded
-video, MRAW and TIFF frames, whose reads decode whole frames, so that each block's read decodes the
-whole recording) are read once and kept for that pass when they fit in a quarter of `memory`;
-float cubes (netCDF, zarr, npy, read by hyperslab) are read again, which costs less than holding
-them.
+`BLOCK_BYTES`. What every pixel keeps to the end (its floor, n_windows + 4 numbers, its slow
+coefficients and floors, 10 more; the slow search's own statistics, ~0.1 kB a pixel, once the
+blocks are done) is not counted in `memory`. A cube whose time axis is split in chunks (video
+frames, netCDF read by frames) is read block by block (each block's reads are its own tasks, so
+only its pixels are held), never rechunked whole. A second pass (spectra not kept) reads the frames
+again in slabs (`SLAB_BYTES`, whole frames: the cheapest reads) and adds up the DFT sums of each
+slab. Integer counts (decoded video, MRAW and TIFF frames, whose reads decode whole frames, so that
+each block's read decodes the whole recording) are read once and kept for that pass when they fit
+in a quarter of `memory`; float cubes (netCDF, zarr, npy, read by hyperslab) are read again, which
+costs less than holding them.
 
 No equation of the paper is used here (the paper stops at the sensitivity, eq. 21; sec. 5 asks for
 combining pixels, which this map prepares).
@@ -85,10 +101,12 @@ from threadpoolctl import threadpool_limits
 
 from vibinverse.errors import DataError, InputError
 from vibinverse.imaging.empirical_null import Z_EDGES, EmpiricalNull, z_counts
-from vibinverse.imaging.line_checks import VIBRATION, LineEvidence, classify, frame_combs
+from vibinverse.imaging.line_checks import VIBRATION, LineEvidence, classify, frame_combs, notes
 from vibinverse.imaging.scheduler import session
+from vibinverse.imaging.slow_lines import MIN_CHANGES, SlowSearch, series_flags
 from vibinverse.imaging.spill import Spill
 from vibinverse.imaging.whitening import (
+    LOW_BINS,
     TINY,
     Floor,
     FrequencyGrid,
@@ -99,7 +117,8 @@ from vibinverse.imaging.whitening import (
     frequency_grid,
     log_tail,
     refine,
-    spectrum_rows,
+    spectra_rows,
+    white_floor,
     whiten_rows,
 )
 from vibinverse.io.file_basics import csv_cell
@@ -123,19 +142,21 @@ SPLIT_EVERY = 4  # the second pass adds its slabs' sums 4 at a time
 
 
 # ---------------------------------------------------------------------------------- one chunk's work
-def _batches(block: Any, grid: FrequencyGrid, batch: int):
-    """(slice of the block's pixels, their means, their powers in rows (pixels, n_freq)) for
-    batches of `batch` pixels of a block (time, y, x), given whole or as its time pieces (a list,
-    as read: each batch gathers its pixels' series from them, float64)."""
+def _batches(block: Any, grid: FrequencyGrid, batch: int, ends: tuple[float, float] | None = None, flags=False):
+    """(slice of the block's pixels, their means, their powers in rows (pixels, n_freq), their slow
+    coefficients (pixels, LOW_BINS), with `flags` their `series_flags` at the range's `ends`, else
+    None) for batches of `batch` pixels of a block (time, y, x), given whole or as its time pieces
+    (a list, as read: each batch gathers its pixels' series from them, float64)."""
     pieces = [np.asarray(p) for p in block] if isinstance(block, (list, tuple)) else [np.asarray(block)]
     flats = [p.reshape(p.shape[0], -1) for p in pieces]
     for start in range(0, flats[0].shape[1], batch):
         sl = slice(start, min(start + batch, flats[0].shape[1]))
         y = np.concatenate([f[:, sl] for f in flats], axis=0, dtype=np.float64)
+        flag = series_flags(y, ends) if flags else None
         if grid.uniform:  # a missing sample makes its column's sum (the rfft at f = 0) NaN: checked after
-            mean, power = spectrum_rows(y, grid)
+            mean, power, slow = spectra_rows(y, grid)
             if np.isfinite(mean).all():
-                yield sl, mean, power
+                yield sl, mean, power, slow, flag
                 continue
         bad = ~np.isfinite(y)
         if bad.any():  # missing samples: the pixel's mean; a pixel without samples: mean NaN, no power
@@ -143,11 +164,11 @@ def _batches(block: Any, grid: FrequencyGrid, batch: int):
             count = (~bad).sum(axis=0)
             fill = np.divide(y.sum(axis=0), count, out=np.zeros(y.shape[1]), where=count > 0)
             y[bad] = np.broadcast_to(fill[None, :], y.shape)[bad]
-            mean, power = spectrum_rows(y, grid)
+            mean, power, slow = spectra_rows(y, grid)
             mean[count == 0] = np.nan
         else:
-            mean, power = spectrum_rows(y, grid)
-        yield sl, mean, power
+            mean, power, slow = spectra_rows(y, grid)
+        yield sl, mean, power, slow, flag
 
 
 def _refined(power: np.ndarray, idx: np.ndarray, n_freq: int) -> np.ndarray:
@@ -159,15 +180,27 @@ def _refined(power: np.ndarray, idx: np.ndarray, n_freq: int) -> np.ndarray:
     return np.where(i == idx, refine(log_p), 0.0)
 
 
-def first_pass(block: Any, grid: FrequencyGrid, batch: int, keep: bool = False) -> dict[str, Any]:
+def first_pass(
+    block: Any, grid: FrequencyGrid, batch: int, keep: bool = False, ends: tuple[float, float] | None = None
+) -> dict[str, Any]:
     """A block (time, y, x; or its time pieces, a list) -> its maps (peak bin, peak frequency,
     peak SNR, mean frame; (y, x)), the largest z over its pixels at each frequency of the band, and
     its pixels' floors ("floor", a `Floor` over the block's pixels, for the second pass); with
     `keep`, also its pixels' powers ("power", (pixels, n_freq)), from which the second pass takes
-    the powers at the lines' bins without reading the block again."""
+    the powers at the lines' bins without reading the block again; how often its pixels' values
+    change ("changes", (pixels,): one that changes in fewer than MIN_CHANGES samples has too few
+    events for its spectrum to be a noise's, nor a line's: its z is 0 but in the counts). When
+    slow bins are searched, its pixels' slow coefficients ("slow", (pixels, LOW_BINS)), white floors
+    ("white", (pixels, 2)) and whether they reach the `ends` of the range ("clipped"), for
+    `SlowSearch`; else those are None."""
     ny, nx = (block[0] if isinstance(block, (list, tuple)) else block).shape[1:]
     npix = ny * nx
     kept = np.empty((npix, grid.n_freq)) if keep else None
+    searched = grid.slow_hi > grid.slow_lo
+    slow_coef = np.zeros((npix, LOW_BINS), dtype=np.complex128) if searched else None
+    white = np.zeros((npix, 2)) if searched else None
+    clip = np.zeros(npix, dtype=bool) if searched else None
+    changes = np.zeros(npix, dtype=np.int32)
     peak_bin = np.zeros(npix, dtype=np.int64)
     peak_f = np.zeros(npix)
     peak_z = np.zeros(npix)
@@ -176,8 +209,13 @@ def first_pass(block: Any, grid: FrequencyGrid, batch: int, keep: bool = False) 
     zmax = np.zeros(grid.n_searched)
     counts = np.zeros((grid.n_searched, Z_EDGES.size), dtype=np.int64)
     band = np.arange(grid.lo, grid.hi)
-    for sl, m, power in _batches(block, grid, batch):
+    for sl, m, power, slow, (edge, change) in _batches(block, grid, batch, ends, flags=True):
+        changes[sl] = change
+        if searched:
+            slow_coef[sl], white[sl], clip[sl] = slow, white_floor(power, grid), edge
         z, floor = whiten_rows(power, grid, band)
+        counts += z_counts(z)  # every pixel, as the frame (the frame-wide check) and the pooled null
+        z[change < MIN_CHANGES] = 0.0
         rows = np.arange(z.shape[0])
         k = np.argmax(z, axis=1)
         idx = k + grid.lo
@@ -187,7 +225,6 @@ def first_pass(block: Any, grid: FrequencyGrid, batch: int, keep: bool = False) 
         mean[sl] = m
         coef[sl], scale[sl] = floor.coef, floor.scale
         np.maximum(zmax, z.max(axis=0), out=zmax)
-        counts += z_counts(z)
         if kept is not None:
             kept[sl] = power
     shape = (ny, nx)
@@ -200,6 +237,10 @@ def first_pass(block: Any, grid: FrequencyGrid, batch: int, keep: bool = False) 
         "z_counts": counts,
         "floor": Floor(coef, scale),
         "power": kept,
+        "slow": slow_coef,
+        "white": white,
+        "clipped": clip,
+        "changes": changes,
     }
 
 
@@ -225,7 +266,7 @@ def line_powers(block: Any, grid: FrequencyGrid, cols: np.ndarray, batch: int, m
             sl = slice(start, min(start + batch, flat.shape[1]))
             power[sl] = dft_power(dft_sums(flat[:, sl], mean[sl], basis), grid, cols)
     else:
-        for sl, _, p in _batches(block, grid, batch):
+        for sl, _, p, _, _ in _batches(block, grid, batch):
             power[sl] = p[:, cols]
     return power
 
@@ -401,6 +442,8 @@ class Line:
     kind: str = VIBRATION  # "vibration" (claimed) or what else it is (`line_checks`)
     reason: str = ""  # why it is not vibration, one sentence
     alias_frequency: float = math.nan  # Hz: the other reading, fs - frequency (uniform frames)
+    slow: bool = False  # found by the slow search (1-4 cycles per record: `slow_lines`)
+    note: str = ""  # what to know about it however it is classified (`line_checks.notes`), or empty
 
     @property
     def claimed(self) -> bool:
@@ -418,7 +461,8 @@ class DetectionMap:
     def table(self) -> list[dict[str, Any]]:
         """One row per (line, cluster): frequency_hz, snr (mean over the cluster's pixels carrying the
         line), max_snr, false_alarm_probability (the line's), kind ("vibration" when claimed),
-        alias_frequency_hz (the other reading, fs - f), cluster, n_pixels, centroid, bbox."""
+        alias_frequency_hz (the other reading, fs - f), cluster, n_pixels, centroid, bbox, note
+        (e.g. a slow line's)."""
         rows = []
         for line in self.lines:
             for c in line.clusters:
@@ -439,6 +483,7 @@ class DetectionMap:
                         "bbox_y1": c.bbox[1],
                         "bbox_x0": c.bbox[2],
                         "bbox_x1": c.bbox[3],
+                        "note": line.note,
                     }
                 )
         return rows
@@ -480,7 +525,7 @@ class DetectionMap:
 LINE_TABLE_COLUMNS = (
     "line", "frequency_hz", "snr", "max_snr", "false_alarm_probability", "kind", "alias_frequency_hz", "cluster",
     "n_pixels",
-    "centroid_y", "centroid_x", "bbox_y0", "bbox_y1", "bbox_x0", "bbox_x1",
+    "centroid_y", "centroid_x", "bbox_y0", "bbox_y1", "bbox_x0", "bbox_x1", "note",
 )  # fmt: skip
 
 
@@ -557,6 +602,17 @@ def _outlines(cluster: np.ndarray) -> Any:
 
 
 # ------------------------------------------------------------------------------------- the whole map
+def range_ends(cube: xr.DataArray) -> tuple[float, float] | None:
+    """The ends of an integer cube's range, where a pixel is clipped: (the dtype's smallest, 2^bit_depth
+    - 1 by the attribute bit_depth, else the dtype's largest); None for floats (no known range)."""
+    if not np.issubdtype(cube.dtype, np.integer):
+        return None
+    info = np.iinfo(cube.dtype)
+    bits = cube.attrs.get("bit_depth")
+    top = float(2 ** int(bits) - 1) if isinstance(bits, numbers.Integral) and 0 < int(bits) < info.bits else info.max
+    return float(info.min), float(top)
+
+
 def _check_cube(cube: Any) -> xr.DataArray:
     if not isinstance(cube, xr.DataArray):
         raise InputError(f"cube: an xarray.DataArray (time, y, x) is needed, not {type(cube).__name__}")
@@ -579,16 +635,42 @@ def _lines_of(band_max: np.ndarray, grid: FrequencyGrid, n_pixels: int, alpha: f
     fap = corrected(log_tail(band_max, grid.half_width), grid.n_searched * n_pixels)
     if null is not None:
         fap = np.maximum(fap, null.line_probability(band_max))
+    return _runs(fap, band_max, band_max, grid.lo, alpha, max_lines)
+
+
+def _runs(fap: np.ndarray, score: np.ndarray, value: np.ndarray, first: int, alpha: float, max_lines: int):
+    """[(bin, value there, fap there)] of the groups of bins (first + index) whose fap < alpha, at most
+    MERGE_GAP bins apart (one line), each at its largest `score`, the largest score first."""
     hit = np.flatnonzero(fap < alpha)
     groups = np.split(hit, np.flatnonzero(np.diff(hit) > MERGE_GAP + 1) + 1) if hit.size else []
-    runs = []
-    for g in groups:
-        k = int(g[np.argmax(band_max[g])])
-        runs.append((grid.lo + k, float(band_max[k]), float(fap[k])))
-    runs.sort(key=lambda r: -r[1])
-    if len(runs) > max_lines:
-        logger.info(f"detect: {len(runs)} lines pass alpha = {alpha:g}; kept the {max_lines} strongest")
-    return runs[:max_lines]
+    picked = sorted((int(g[np.argmax(score[g])]) for g in groups), key=lambda k: -score[k])
+    if len(picked) > max_lines:
+        logger.info(f"detect: {len(picked)} lines pass alpha = {alpha:g}; kept the {max_lines} strongest")
+    return [(first + k, float(value[k]), float(fap[k])) for k in picked[:max_lines]]
+
+
+def _slow_lines(slow: SlowSearch | None, alpha: float, max_lines: int, shape: tuple[int, int]):
+    """(runs [(bin, largest z, fap)], snr, cycles, carries (lines, y, x), the cycles of every slow
+    bin that passes) of the slow search: the slow bins that pass, MERGE_GAP apart at most (the 4 slow
+    bins: one line), at the bin of largest power above the bulk's median summed over the pixels (a
+    sway's fundamental spreads over more pixels than its harmonics); each pixel's largest z within
+    LINE_BINS of it and whether it passes Benjamini-Hochberg at alpha (its smallest p-value there,
+    corrected for those bins). The line's frequency is its bin's (cycles / T), known to about a bin."""
+    empty = np.zeros((0, *shape))
+    if slow is None:
+        return [], empty, empty, empty.astype(bool), ()
+    excess = np.maximum(slow.z - slow.tails[0].median[None, :], 0.0).sum(axis=0)
+    fap = slow.line_probability()
+    runs = _runs(fap, excess, slow.z.max(axis=0), int(slow.bins[0]), alpha, max_lines)
+    snr, cycles, carries = (np.zeros((len(runs), shape[0] * shape[1])) for _ in range(3))
+    for k, (b, _, _) in enumerate(runs):
+        near = np.flatnonzero(np.abs(slow.bins - b) <= LINE_BINS)
+        logs = np.stack([slow.log_p(j) for j in near]).min(axis=0)
+        snr[k] = slow.z[:, near].max(axis=1)
+        cycles[k] = b + 1
+        carries[k] = _benjamini_hochberg(corrected(logs, near.size), alpha)
+    passing = tuple(int(c) for c in slow.bins[fap < alpha] + 1)
+    return runs, *(m.reshape(len(runs), *shape) for m in (snr, cycles)), carries.reshape(len(runs), *shape) > 0, passing
 
 
 def _benjamini_hochberg(p: np.ndarray, alpha: float) -> np.ndarray:
@@ -659,6 +741,7 @@ def detection_map(
     # `memory` (the rest bounds the blocks in flight); else the second pass reads the cube again
     spectra = n_pixels * grid.n_freq * 8
     keep_spectra = spectra <= int(memory) // 4
+    ends = range_ends(cube)
     with (
         session(scheduler, workers, progress=progress) as run,
         threadpool_limits(1, user_api="blas"),
@@ -686,7 +769,7 @@ def detection_map(
             arrays = run.persist(*[b for _, _, b in blocks])
             blocks = [(ys, xs, a) for (ys, xs, _), a in zip(blocks, arrays)]
             logger.debug(f"detect: cube read and kept in {time.perf_counter() - clock:.2f} s")
-        passes = [_delayed(first_pass)(_pieces(b), grid, plan.batch, keep_spectra) for _, _, b in blocks]
+        passes = [_delayed(first_pass)(_pieces(b), grid, plan.batch, keep_spectra, ends) for _, _, b in blocks]
         # the histograms of z are added up as the blocks finish (a tree of sums), not held per block
         sums = [_delayed(_item)(f, "z_counts") for f in passes]
         while len(sums) > 1:
@@ -700,17 +783,38 @@ def detection_map(
         coef = np.zeros((ny, nx, first[0]["floor"].coef.shape[1]))
         scale = np.zeros((ny, nx, first[0]["floor"].scale.shape[1]))
         band_max = np.zeros(grid.n_searched)
+        searched = first[0]["slow"] is not None
+        slow_coef = np.zeros((ny, nx, LOW_BINS), dtype=np.complex128) if searched else None
+        white, clip = (np.zeros((ny, nx, 2)), np.zeros((ny, nx), dtype=bool)) if searched else (None, None)
+        changes = np.zeros((ny, nx), dtype=np.int32)
         for (ys, xs, _), part in zip(blocks, first):
             for k in maps:
                 maps[k][ys, xs] = part[k]
             coef[ys, xs] = part["floor"].coef.reshape(*part["mean_frame"].shape, -1)
             scale[ys, xs] = part["floor"].scale.reshape(*part["mean_frame"].shape, -1)
             np.maximum(band_max, part["band_max"], out=band_max)
+            if searched:
+                slow_coef[ys, xs] = part["slow"].reshape(*part["mean_frame"].shape, -1)
+                white[ys, xs] = part["white"].reshape(*part["mean_frame"].shape, 2)
+                clip[ys, xs] = part["clipped"].reshape(part["mean_frame"].shape)
+            changes[ys, xs] = part["changes"].reshape(part["mean_frame"].shape)
         # the recording's own null, away from the frequencies that pass on white noise
         candidates = [b - grid.lo for b, _, _ in _lines_of(band_max, grid, n_pixels, float(alpha), grid.n_searched)]
         null = EmpiricalNull.from_counts(counts, band_max, np.asarray(candidates, dtype=np.int64))
         runs = _lines_of(band_max, grid, n_pixels, float(alpha), max_lines, null)
         maps["band_max"] = band_max
+        floor = Floor(coef.reshape(n_pixels, -1), scale.reshape(n_pixels, -1))
+        slow = None
+        if searched:  # the slow bins, judged against the frame's pixels at each (`slow_lines`)
+            slow = SlowSearch.from_parts(
+                slow_coef.reshape(n_pixels, -1),
+                white.reshape(n_pixels, 2),
+                maps["mean_frame"],
+                (clip.ravel(), changes.ravel()),
+                floor,
+                grid,
+            )
+            slow_coef = None
         bins = tuple(r[0] for r in runs)
         snr = np.zeros((len(bins), ny, nx))
         freq = np.zeros((len(bins), ny, nx))
@@ -723,8 +827,8 @@ def detection_map(
                 power = power.reshape(n_pixels, -1)
             else:
                 power = _line_powers(run, data, blocks, grid, cols, plan, maps["mean_frame"], memory, spilled)
-            floor = Floor(coef.reshape(n_pixels, -1), scale.reshape(n_pixels, -1))
             snr, freq = (m.reshape(len(bins), ny, nx) for m in line_maps(power, floor, grid, bins))
+            snr[:, changes < MIN_CHANGES] = 0.0  # too few events to carry a line (`first_pass`)
             how = "from the kept spectra" if keep_spectra else "second pass"
             logger.debug(f"detect: SNR maps of {len(bins)} lines, {how}: {time.perf_counter() - clock:.2f} s")
     log_p = _log_p(maps["peak_snr"], grid, null)
@@ -734,12 +838,17 @@ def detection_map(
     for k, b in enumerate(bins):
         width = min(grid.hi, b + LINE_BINS + 1) - max(grid.lo, b - LINE_BINS)
         carries[k] = _benjamini_hochberg(corrected(_log_p(snr[k], grid, null), width), float(alpha))
+    slow_runs, slow_snr, cycles, slow_carries, passing = _slow_lines(slow, float(alpha), max_lines, (ny, nx))
+    snr = np.concatenate([snr, slow_snr])
+    freq = np.concatenate([freq, cycles * grid.df])
+    carries = np.concatenate([carries, slow_carries])
     cluster, masks = _clusters(snr, carries)
-    lines = _make_lines(runs, grid, snr, freq, carries, masks, null)
-    ds = _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, masks, float(alpha), band, null)
+    lines = _make_lines(runs, slow_runs, grid, snr, freq, carries, masks, null, slow, passing)
+    ds = _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, masks, float(alpha), band, null, slow)
     logger.info(
         f"detect: {n_pixels} pixels x {grid.n_searched} frequencies ({grid.frequencies[grid.lo]:.4g} to "
-        f"{grid.frequencies[grid.hi - 1]:.4g} Hz): {len(lines)} line(s), {len(masks)} cluster(s)"
+        f"{grid.frequencies[grid.hi - 1]:.4g} Hz) and {grid.slow_bins.size if slow else 0} slow ones: "
+        f"{len(lines)} line(s), {len(masks)} cluster(s)"
     )
     return DetectionMap(ds, lines)
 
@@ -844,25 +953,47 @@ def _delayed(fn):
     return dask.delayed(fn, pure=True)
 
 
-def _make_lines(runs, grid, snr, freq, carries, masks, null) -> list[Line]:
-    lines = [_line(k, run, grid, snr, freq, carries, masks) for k, run in enumerate(runs)]
-    combs = frame_combs([ln.frequency for ln in lines], 2.0 * grid.nyquist, grid.df) if grid.uniform else []
+def _make_lines(runs, slow_runs, grid, snr, freq, carries, masks, null, slow, passing=()) -> list[Line]:
+    """The lines of the `runs` of `_lines_of`, then those of the slow search (`_slow_lines`),
+    classified (`line_checks`) and noted."""
+    lines = [_line(k, run, grid, snr, freq, carries, masks) for k, run in enumerate([*runs, *slow_runs])]
+    regular = [ln.frequency for ln in lines[: len(runs)]]
+    combs = frame_combs(regular, 2.0 * grid.nyquist, grid.df) if grid.uniform else [None] * len(runs)
     out = []
     for k, line in enumerate(lines):
-        b = runs[k][0]
-        evidence = LineEvidence(
-            frequency=line.frequency,
-            df=grid.df,
-            nyquist=grid.nyquist,
-            uniform=grid.uniform,
-            cluster_sizes=tuple(c.n_pixels for c in line.clusters),
-            frame_median=float(null.frame_median[b - grid.lo]),
-            frame_wide=null.frame_wide(b - grid.lo),
-            comb_period=combs[k] if combs else None,
-        )
+        common = {
+            "frequency": line.frequency,
+            "df": grid.df,
+            "nyquist": grid.nyquist,
+            "uniform": grid.uniform,
+            "cluster_sizes": tuple(c.n_pixels for c in line.clusters),
+        }
+        if k < len(runs):
+            j = runs[k][0] - grid.lo
+            evidence = LineEvidence(
+                **common, frame_median=float(null.frame_median[j]), frame_wide=null.frame_wide(j), comb_period=combs[k]
+            )
+        else:
+            b = slow_runs[k - len(runs)][0]
+            j = int(np.searchsorted(slow.bins, b))
+            member = carries[k].ravel()
+            evidence = LineEvidence(
+                **common,
+                frame_median=float(slow.frame_median[j]),
+                frame_wide=slow.frame_wide(j),
+                cycles=float(b + 1),
+                slow_passing=tuple(c for c in passing if c != b + 1),
+                clipped_share=float(slow.clipped[member].mean()) if member.any() else 0.0,
+                motion_share=slow.motion_share(j, member),
+                light_share=slow.light_share(j, member),
+            )
         kind, why = classify(evidence)
         alias = 2.0 * grid.nyquist - line.frequency if grid.uniform else math.nan
-        out.append(dataclasses.replace(line, kind=kind, reason=why, alias_frequency=alias))
+        out.append(
+            dataclasses.replace(
+                line, kind=kind, reason=why, alias_frequency=alias, slow=k >= len(runs), note=notes(evidence)
+            )
+        )
     return out
 
 
@@ -910,9 +1041,12 @@ VARIABLES = {
     "line_kind": (
         ("line",),
         None,
-        "what the line is: vibration (claimed), or frame-wide, frame-pattern, unlocated, scattered",
+        "what the line is: vibration (claimed), or frame-wide, frame-pattern, unlocated, scattered, local-light, "
+        "clipped, drift",
     ),
     "line_reason": (("line",), None, "why the line is not claimed as vibration (empty when it is)"),
+    "line_slow": (("line",), "1", "1 where the line is the slow search's (1-4 cycles per record: `slow_lines`)"),
+    "line_note": (("line",), None, "what to know about the line however it is classified (a slow line's), or empty"),
     "line_alias_frequency": (
         ("line",),
         "Hz",
@@ -920,6 +1054,18 @@ VARIABLES = {
     ),
     "band_max_snr": (("frequency",), "1", "largest whitened power over the pixels at each searched frequency"),
     "frame_median_snr": (("frequency",), "1", "median whitened power over the pixels at each searched frequency"),
+    "slow_max_snr": (
+        ("slow_frequency",),
+        "1",
+        "largest power left by the common mode / white floor over the pixels at each slow bin (NaN: not searched)",
+    ),
+    "slow_null_median": (("slow_frequency",), "1", "median of that power over the pixels (the slow null's m)"),
+    "slow_null_scale": (("slow_frequency",), "1", "scale of the slow null's gamma tail (shape at most 1/2)"),
+    "slow_frame_median_snr": (
+        ("slow_frequency",),
+        "1",
+        "median over the pixels of the power left by the common mode, whitened by the pixels' floors",
+    ),
     "snr": (("line", "y", "x"), "1", "largest whitened power within one Fourier bin of the line"),
     "carries_line": (("line", "y", "x"), "1", "1 where the pixel carries the line (Benjamini-Hochberg at alpha)"),
     "cluster": (("y", "x"), "1", "cluster of pixels carrying a line: 0 none, k >= 1 cluster k (cluster_id)"),
@@ -928,7 +1074,20 @@ VARIABLES = {
 }
 
 
-def _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, masks, alpha, band, null) -> xr.Dataset:
+def _slow_values(slow: SlowSearch | None, grid: FrequencyGrid) -> dict[str, np.ndarray]:
+    """The slow search's variables of detection.nc at the grid's slow bins (NaN without a search)."""
+    if slow is None:
+        nan = np.full(grid.slow_bins.size, np.nan)
+        return dict.fromkeys(("slow_max_snr", "slow_null_median", "slow_null_scale", "slow_frame_median_snr"), nan)
+    return {
+        "slow_max_snr": slow.z.max(axis=0),
+        "slow_null_median": slow.tails[0].median,
+        "slow_null_scale": slow.tails[0].gamma_scale,
+        "slow_frame_median_snr": slow.frame_median,
+    }
+
+
+def _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, masks, alpha, band, null, slow):
     n_lines, n_clusters = len(lines), len(masks)
     cluster_lines = np.zeros((n_clusters, n_lines), dtype=np.int8)
     line_of_cluster = np.zeros(n_clusters, dtype=np.int32)
@@ -951,9 +1110,12 @@ def _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, mas
         "line_false_alarm_probability": np.array([ln.false_alarm_probability for ln in lines], dtype=np.float64),
         "line_kind": np.array([ln.kind for ln in lines], dtype=object),
         "line_reason": np.array([ln.reason for ln in lines], dtype=object),
+        "line_slow": np.array([ln.slow for ln in lines], dtype=np.int8),
+        "line_note": np.array([ln.note for ln in lines], dtype=object),
         "line_alias_frequency": np.array([ln.alias_frequency for ln in lines], dtype=np.float64),
         "band_max_snr": maps["band_max"],
         "frame_median_snr": null.frame_median,
+        **_slow_values(slow, grid),
         "snr": snr,
         "carries_line": carries.astype(np.int8),
         "cluster": cluster.astype(np.int32),
@@ -977,6 +1139,11 @@ def _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, mas
                 "cluster_id",
                 np.array([c for c, _ in masks], dtype=np.int32),
                 {"units": "1", "long_name": "cluster"},
+            ),
+            "slow_frequency": (
+                "slow_frequency",
+                grid.frequencies[grid.slow_bins],
+                {"units": "Hz", "long_name": "slow Fourier frequency searched (1-4 cycles per record)"},
             ),
         },
     )
@@ -1003,6 +1170,12 @@ def _dataset(cube, grid, maps, pixel_fap, fap, lines, snr, carries, cluster, mas
                 "(pooled whitened powers off the lines; the exponential tail of the per-frequency maxima)"
             ),
             "null_tail_threshold_scale": np.array(null.tail if null.tail else [np.nan, np.nan]),
+            "slow_search": (
+                "the first 4 Fourier frequencies apart: the power left by the frame's common mode over each "
+                "pixel's white floor, against the exponential tail of the pixels' bulk at each bin"
+                if slow is not None
+                else "not searched (outside the band, or too few pixels with power)"
+            ),
             "row_offset": "ignored: a per-row time shift changes the phase of a periodogram, not its power",
             "source": str(cube.attrs.get("source", "")),
             "Conventions": "CF-1.8",

@@ -30,6 +30,9 @@ larger of the white-noise false-alarm probability and one measured on the record
   camera motion) rather than a structure's vibration, which moves the intensity only where the
   image has contrast.
 
+The slow bins below the band (1-4 cycles per record) never enter these: their own null is
+`slow_lines`'.
+
 No equation of the paper is used here (the paper assumes white sensor noise, eq. 21).
 """
 

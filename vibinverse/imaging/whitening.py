@@ -29,6 +29,11 @@ Per pixel (float64, a batch of pixels at a time):
    of estimating the floor from 128 neighbours). `log_tail` computes it; `corrected` corrects it
    for many independent tests.
 
+The first LOW_BINS frequencies (1-4 cycles per record) are searched apart (`slow_lines`): for them
+`spectra_rows` also gives each pixel's Fourier coefficients there and `white_floor` its flat
+floors (the first and last windows' medians / c, no baseline: at a few bins on the ln f axis the
+baseline's fit is unreliable).
+
 Layouts: `spectrum`, `periodogram` and `whiten` take and give (frequency, pixels) arrays; the
 `*_rows` functions work on rows (pixels, frequency), where a pixel's floor windows are contiguous
 (a window's median is one `np.partition` over the rows). `fit_floor` keeps each pixel's fitted
@@ -58,7 +63,7 @@ LARGEST_VALUE = 1e150
 MIN_HALF_WIDTH = 8  # fewer Fourier frequencies than 2 * 8 + 1 (35 frames): too short a record
 BASELINE_DEGREE = 3  # the smooth baseline: a cubic in ln f fitted to ln P
 BASELINE_DENSE, BASELINE_STRIDE = 256, 4  # ... at the first 256 frequencies and every 4th after
-LOW_BINS = 4  # the first Fourier frequencies, never searched (drift)
+LOW_BINS = 4  # the first Fourier frequencies (1-4 cycles per record): drift lives there, searched apart (`slow_lines`)
 # stamps within this fraction of a step from a uniform grid (a container's rounded stamps: 30 fps in
 # milliseconds is 1.5 %) take the rfft: its phase error, at most 2 pi 0.02 f / fs <= 0.063 rad, loses
 # < 0.4 % of a line's power
@@ -80,6 +85,8 @@ class FrequencyGrid:
     lo: int
     hi: int
     half_width: int  # h of the floor's window
+    slow_lo: int = 0  # the slow bins searched (`slow_lines`): i in [slow_lo, slow_hi), within [0, LOW_BINS)
+    slow_hi: int = 0
 
     @property
     def frequencies(self) -> np.ndarray:
@@ -89,6 +96,11 @@ class FrequencyGrid:
     def n_searched(self) -> int:
         """M: the Fourier frequencies in the band (independent for white noise)."""
         return self.hi - self.lo
+
+    @property
+    def slow_bins(self) -> np.ndarray:
+        """The slow bins searched (indices into the grid, below LOW_BINS; `slow_lines`)."""
+        return np.arange(self.slow_lo, self.slow_hi)
 
     @property
     def nyquist(self) -> float:
@@ -136,8 +148,10 @@ class FrequencyGrid:
 
 
 def frequency_grid(time: np.ndarray, band: tuple[float, float] | None = None) -> FrequencyGrid:
-    """The Fourier frequencies of stamps `time` (s) and the band searched (Hz, default: from the
-    (LOW_BINS+1)-th Fourier frequency up to Nyquist). One-line DataError/InputError naming the field."""
+    """The Fourier frequencies of stamps `time` (s), the band searched (Hz, default: from the
+    (LOW_BINS+1)-th Fourier frequency up to Nyquist; it must hold one) and the slow bins below it
+    searched apart (those of the first LOW_BINS in the band). One-line DataError/InputError naming
+    the field."""
     t = np.asarray(time, dtype=np.float64)
     if t.ndim != 1 or not np.all(np.isfinite(t)):
         raise DataError("time: stamps must be a finite 1-D coordinate, in seconds")
@@ -158,6 +172,7 @@ def frequency_grid(time: np.ndarray, band: tuple[float, float] | None = None) ->
         raise DataError(f"time: {t.size} frames are too few for a detection map (at least {need})")
     df = 1.0 / span
     lo, hi = LOW_BINS, n_freq
+    slow_lo, slow_hi = 0, LOW_BINS
     if band is not None:
         fmin, fmax = (float(band[0]), float(band[1]))
         fmax = 0.5 / dt if fmax == math.inf else fmax  # "5:" on the command line: up to Nyquist
@@ -171,10 +186,13 @@ def frequency_grid(time: np.ndarray, band: tuple[float, float] | None = None) ->
         if inside.size == 0:
             raise InputError(
                 f"--band: no searched frequency in {fmin:g}:{fmax:g} Hz; the searched frequencies are "
-                f"{(LOW_BINS + 1) * df:.6g} to {n_freq * df:.6g} Hz in steps of {df:.6g} Hz"
+                f"{(LOW_BINS + 1) * df:.6g} to {n_freq * df:.6g} Hz in steps of {df:.6g} Hz (the slow ones, "
+                f"{df:.6g} to {LOW_BINS * df:.6g} Hz, are searched with them)"
             )
         lo, hi = int(inside[0]), int(inside[-1]) + 1
-    return FrequencyGrid(t, uniform, dt, df, n_freq, lo, hi, half)
+        slow = np.flatnonzero((f[:LOW_BINS] >= fmin) & (f[:LOW_BINS] <= fmax))
+        slow_lo, slow_hi = (int(slow[0]), int(slow[-1]) + 1) if slow.size else (0, 0)
+    return FrequencyGrid(t, uniform, dt, df, n_freq, lo, hi, half, slow_lo, slow_hi)
 
 
 # ------------------------------------------------------------------------------------- the statistics
@@ -210,6 +228,16 @@ def spectrum_rows(y: np.ndarray, grid: FrequencyGrid) -> tuple[np.ndarray, np.nd
     |sum y e^{-2 pi i f t}|^2 / N by scipy's rfft down the columns on uniform stamps (the mean only
     touches f = 0; the line is taken out of the Fourier coefficients, `ramp_spectrum`), nifty-ls
     Lomb-Scargle ("psd" normalization, floating mean) on irregular ones."""
+    mean, power, _ = spectra_rows(y, grid)
+    return mean, power
+
+
+def spectra_rows(y: np.ndarray, grid: FrequencyGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`spectrum_rows` and the Fourier coefficients (pixels, LOW_BINS; complex) of the series less
+    their mean and line at the first LOW_BINS frequencies, sum y e^{-2 pi i f (t - t_0)}: the rfft's
+    on uniform stamps (|.|^2 / N is the power there), direct sums on irregular ones (their
+    |.|^2 / N, the classical periodogram, differs from Lomb-Scargle's by the sampling's uneven
+    weights)."""
     import scipy.fft
 
     n = y.shape[0]
@@ -226,10 +254,11 @@ def spectrum_rows(y: np.ndarray, grid: FrequencyGrid) -> tuple[np.ndarray, np.nd
         mean = coef[0].real / n
         coef = coef[1 : grid.n_freq + 1]
         coef -= grid.ramp_spectrum[:, None] * slope[None, :]
+        slow = np.ascontiguousarray(coef[:LOW_BINS].T)
         power = np.square(coef.real)
         power += np.square(coef.imag)
         power /= n
-        return mean, np.ascontiguousarray(power.T)
+        return mean, np.ascontiguousarray(power.T), slow
     import nifty_ls
 
     mean = y.mean(axis=0)
@@ -244,7 +273,9 @@ def spectrum_rows(y: np.ndarray, grid: FrequencyGrid) -> tuple[np.ndarray, np.nd
         normalization="psd",
         nthreads=1,  # dask's threads run the blocks in parallel
     )
-    return mean, np.asarray(res.power, dtype=np.float64).reshape(-1, grid.n_freq)
+    phase = (-2j * np.pi * grid.df) * np.outer(grid.time - grid.time[0], np.arange(1, LOW_BINS + 1))
+    slow = y.T @ np.exp(phase)
+    return mean, np.asarray(res.power, dtype=np.float64).reshape(-1, grid.n_freq), slow
 
 
 def spectrum(y: np.ndarray, grid: FrequencyGrid) -> tuple[np.ndarray, np.ndarray]:
@@ -350,6 +381,15 @@ def fit_floor(power: np.ndarray, grid: FrequencyGrid) -> tuple[np.ndarray, Floor
     with np.errstate(divide="ignore"):
         scale = floor_constant(h) / median  # 1 / floor, in units of the baseline
     return ratio, Floor(coef, scale)
+
+
+def white_floor(power: np.ndarray, grid: FrequencyGrid) -> np.ndarray:
+    """Each pixel's two flat floors (pixels, 2) from its powers in rows (pixels, n_freq): the median
+    power of its first and of its last floor window, / c, no baseline: the slow bins' references
+    (`slow_lines`: the first is near them, the last where a drift's red spectrum has died out)."""
+    h, w = grid.half_width, 2 * grid.half_width + 1
+    ends = np.stack([power[:, :w], power[:, grid.n_freq - w :]], axis=1)
+    return np.partition(ends, h, axis=2)[:, :, h] / floor_constant(h)
 
 
 def whiten_rows(power: np.ndarray, grid: FrequencyGrid, bins: np.ndarray | None = None) -> tuple[np.ndarray, Floor]:

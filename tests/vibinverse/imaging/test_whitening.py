@@ -20,7 +20,9 @@ from vibinverse.imaging.whitening import (
     floor_constant,
     frequency_grid,
     log_tail,
+    spectra_rows,
     spectrum_rows,
+    white_floor,
     whiten,
     whiten_rows,
 )
@@ -127,3 +129,37 @@ def test_the_kept_floor_whitens_a_few_bins_as_the_whole_whitening():
     np.testing.assert_allclose(floor.whiten(power[:, bins], grid, bins), z[:, bins], rtol=1e-12)
     assert np.all(z[3] == 0.0) and np.all(np.isfinite(z))
     np.testing.assert_array_equal(whiten(power.T, grid), z.T)  # the column layout: the same numbers
+
+
+# ------------------------------------------------------------------------------------ the slow bins
+def test_the_slow_coefficients_are_the_dft_of_the_series_less_its_mean_and_line():
+    """Uniform stamps: the rfft's at the first LOW_BINS bins, |.|^2 / N the power there; irregular
+    stamps: direct sums of the detrended series at those frequencies."""
+    rng = np.random.default_rng(21)
+    nt = 300
+    for t in (np.arange(nt) / FS, np.sort(np.arange(nt) + rng.uniform(-0.3, 0.3, nt)) / FS):
+        grid = frequency_grid(t)
+        y = rng.standard_normal((nt, 5)) + 3.0 + 0.2 * t[:, None]
+        _, power, slow = spectra_rows(y.copy(), grid)
+        tc = t - t.mean()
+        flat = y - y.mean(axis=0) - np.outer(tc, (tc @ y) / (tc @ tc))
+        f = (np.arange(LOW_BINS) + 1) * grid.df
+        direct = flat.T @ np.exp(-2j * np.pi * np.outer(t - t[0], f))
+        np.testing.assert_allclose(slow, direct, rtol=1e-9, atol=1e-9)
+        if grid.uniform:
+            np.testing.assert_allclose(np.abs(slow) ** 2 / nt, power[:, :LOW_BINS], rtol=1e-9)
+
+
+def test_the_white_floors_are_the_first_and_last_windows_medians_and_the_band_limits_the_slow_bins():
+    rng = np.random.default_rng(22)
+    t = np.arange(1000) / FS
+    grid = frequency_grid(t)
+    power = rng.exponential(size=(3, grid.n_freq))
+    w = 2 * grid.half_width + 1
+    floors = white_floor(power, grid)
+    c = floor_constant(grid.half_width)
+    np.testing.assert_allclose(floors[:, 0], np.median(power[:, :w], axis=1) / c)
+    np.testing.assert_allclose(floors[:, 1], np.median(power[:, -w:], axis=1) / c)
+    assert grid.slow_bins.tolist() == [0, 1, 2, 3]
+    assert frequency_grid(t, (0.25, 10.0)).slow_bins.tolist() == [2, 3]  # 0.3, 0.4 Hz
+    assert frequency_grid(t, (1.0, 10.0)).slow_bins.tolist() == []
