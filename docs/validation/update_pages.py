@@ -168,12 +168,12 @@ def _imaging_run(result: dict[str, Any]) -> str:
 
 
 def _imaging_stored(result: dict[str, Any]) -> dict[str, Any]:
-    """imaging.json with a skipped real video's reason stripped of the machine's directories."""
-    real = result.get("real_video") or {}
-    if "skipped" not in real:
-        return result
-    reason = re.sub(r"/\S*/(realdata-dev/)?", "", real["skipped"])
-    return {**result, "real_video": {**real, "skipped": reason}}
+    """imaging.json with the skipped real videos' reasons stripped of the machine's directories."""
+    reals = [
+        {**r, "skipped": re.sub(r"/\S*/(realdata-dev/)?", "", r["skipped"])} if "skipped" in r else r
+        for r in result.get("real_videos", [])
+    ]
+    return {**result, "real_videos": reals}
 
 
 def _calibration_run(result: dict[str, Any]) -> str:

@@ -129,6 +129,7 @@ DEFAULT_MEMORY = 512 * 2**20  # bytes: the chunks in flight and their float64 wo
 # float64 work per pixel and time sample in a batch (series, spectra, floor), measured with tracemalloc:
 # 29 bytes with the rfft, 85 with nifty-ls (its oversampled NUFFT grid)
 WORK_BYTES_PER_SAMPLE = {True: 32, False: 96}  # keyed by uniform stamps
+LINE_MAP_VALUES = 2**21  # `line_maps` whitens this many powers at a time (16 MB of float64 a work array)
 LINE_BINS = 1  # a pixel's SNR at a line: its largest z within this many bins of the line's bin
 MERGE_GAP = 2  # line frequencies at most 2 bins apart are one line (a damped resonance's hump dips between)
 MIN_CHUNK_PIXELS = 64  # smaller blocks cost more in scheduling than they save
@@ -295,19 +296,22 @@ def line_maps(
     their floors: per line, each pixel's largest z within LINE_BINS of the line's bin and the
     frequency there, refined by the parabola through ln P at it and its neighbours."""
     near, cols = line_bins(grid, bins)
-    z = floor.whiten(power, grid, cols)
-    log_p = np.log(np.maximum(power, TINY))
-    rows = np.arange(z.shape[0])
-    snr = np.zeros((len(bins), rows.size))
-    freq = np.zeros((len(bins), rows.size))
-    for k, nb in enumerate(near):
-        at = np.searchsorted(cols, nb)
-        j = np.argmax(z[:, at], axis=1)
-        idx = nb[j]
-        snr[k] = z[rows, at[j]]
-        inner = (idx >= 1) & (idx <= grid.n_freq - 2)  # else no parabola: the bin's own frequency
-        around = [log_p[rows, np.searchsorted(cols, np.clip(idx + d, 0, grid.n_freq - 1))] for d in (-1, 0, 1)]
-        freq[k] = (idx + 1 + np.where(inner, refine(np.stack(around)), 0.0)) * grid.df
+    snr = np.zeros((len(bins), power.shape[0]))
+    freq = np.zeros((len(bins), power.shape[0]))
+    step = max(1, LINE_MAP_VALUES // max(cols.size, 1))  # pixels at a time: the work arrays stay small
+    for start in range(0, power.shape[0], step):
+        sl = slice(start, min(start + step, power.shape[0]))
+        z = floor.take(sl).whiten(power[sl], grid, cols)
+        log_p = np.log(np.maximum(power[sl], TINY))
+        rows = np.arange(z.shape[0])
+        for k, nb in enumerate(near):
+            at = np.searchsorted(cols, nb)
+            j = np.argmax(z[:, at], axis=1)
+            idx = nb[j]
+            snr[k, sl] = z[rows, at[j]]
+            inner = (idx >= 1) & (idx <= grid.n_freq - 2)  # else no parabola: the bin's own frequency
+            around = [log_p[rows, np.searchsorted(cols, np.clip(idx + d, 0, grid.n_freq - 1))] for d in (-1, 0, 1)]
+            freq[k, sl] = (idx + 1 + np.where(inner, refine(np.stack(around)), 0.0)) * grid.df
     return snr, freq
 
 
@@ -787,7 +791,8 @@ def detection_map(
         slow_coef = np.zeros((ny, nx, LOW_BINS), dtype=np.complex128) if searched else None
         white, clip = (np.zeros((ny, nx, 2)), np.zeros((ny, nx), dtype=bool)) if searched else (None, None)
         changes = np.zeros((ny, nx), dtype=np.int32)
-        for (ys, xs, _), part in zip(blocks, first):
+        for i, ((ys, xs, _), part) in enumerate(zip(blocks, first)):
+            first[i] = {"power": part["power"]}  # the rest is placed in the frame's arrays below: let go
             for k in maps:
                 maps[k][ys, xs] = part[k]
             coef[ys, xs] = part["floor"].coef.reshape(*part["mean_frame"].shape, -1)
@@ -926,9 +931,11 @@ def _line_powers(run, data, blocks, grid, cols, plan, mean_frame, memory, spille
     parts = run.compute(
         *[_delayed(line_powers)(_pieces(b), grid, cols, plan.batch, mean_frame[ys, xs].ravel()) for ys, xs, b in blocks]
     )
+    parts = list(parts)
     power = np.zeros((ny, nx, cols.size))
-    for (ys, xs, _), p in zip(blocks, parts):
-        power[ys, xs] = p.reshape(power[ys, xs].shape)
+    for k, (ys, xs, _) in enumerate(blocks):
+        power[ys, xs] = parts[k].reshape(power[ys, xs].shape)
+        parts[k] = None  # each block's part let go as it is placed
     return power.reshape(ny * nx, -1)
 
 

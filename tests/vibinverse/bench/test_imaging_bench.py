@@ -24,7 +24,7 @@ def test_a_small_imaging_bench_has_every_row(tmp_path):
     # 4 pixels know the drive frequency better than one (on 5 s one pixel's Laplace sd is not yet
     # asymptotic, so the ratio is not the 1 / sqrt(N) of the full bench)
     assert fits[1]["drive_frequency_sd"] < fits[0]["drive_frequency_sd"]
-    real = result["real_video"]  # the real-size case: measured with the corpus, said skipped without
+    (real,) = result["real_videos"]  # the real-size case: measured with the corpus, said skipped without
     if "skipped" not in real:
         assert real["seconds"] > 0 and real["peak_mb"] > real["base_mb"] > 0
         assert any(abs(f - 32.0) < 0.6 for f in real["claimed_hz"])  # the fork
