@@ -26,3 +26,17 @@ def test_ci_fails_a_test_skipped_for_a_reason_it_does_not_allow(tmp_path):
     assert not unexpected_skip("this FFmpeg build has no h264 encoder", {"VIBINVERSE_NO_SKIPS": "1"})
     assert not unexpected_skip("pyOMA2 is not installed", {})
     assert "VIBINVERSE_NO_SKIPS=1" in (Path(__file__).resolve().parents[1] / ".ci" / "run").read_text()
+
+
+def test_the_classifiers_name_the_pythons_that_ci_runs_and_requires_python_starts_at_the_oldest():
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    versions = sorted(
+        (
+            int(c.rsplit(".", 1)[1])
+            for c in project["classifiers"]
+            if c.startswith("Programming Language :: Python :: 3.")
+        ),
+    )
+    assert project["requires-python"] == f">=3.{versions[0]}"
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert f"python3.{versions[-1]}" in ci  # the newest classified Python is the one .ci/run tries
