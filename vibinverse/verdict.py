@@ -331,6 +331,18 @@ def trust(summary: dict, lines: list[VerdictLine] | None = None) -> tuple[bool |
                     f"more {kinds} than the cap of {entry.get('cap')}",
                 )
             )
+    sways = d.get("slow_sway")
+    for entry in sways if isinstance(sways, list) else []:
+        if isinstance(entry, dict):
+            unknown.append(
+                (
+                    f"the pixels carry a slow line of {format_number(entry.get('cycles'), '.0f')} cycles in the record "
+                    f"(detect's reading {format_number(entry.get('frequency'), '.4g')} +- "
+                    f"{format_number(entry.get('resolution'), '.2g')} Hz): the joint fit of a sway of so few cycles is "
+                    "not calibrated, its intervals can miss",
+                    "a slow sway: intervals not calibrated",
+                )
+            )
     ambiguous = d.get("ambiguous")
     if isinstance(ambiguous, list) and ambiguous:
         failed.append(

@@ -207,3 +207,12 @@ def test_a_line_test_that_names_its_frequency_is_shown_with_that_frequency():
     by_what = {line.what: line for line in verdict(s).lines}
     assert by_what["line_0"].parameter == "lines[0].frequency" and by_what["line_0"].value == 5.1
     assert by_what["mode_0"].parameter == "modes[0].frequency" and by_what["mode_0"].value == 2.3
+
+
+def test_a_slow_sway_in_the_pixels_leaves_trust_undecided_and_gives_detects_reading():
+    s = summary(diagnostics__slow_sway=[{"frequency": 2 / 9, "cycles": 2.0, "resolution": 1 / 9}])
+    v = verdict(s)
+    assert v.trusted is None and "a slow sway: intervals not calibrated" in v.headline
+    (reason,) = [r for r in v.reasons if "slow line" in r]
+    assert "2 cycles in the record" in reason and "0.2222 +- 0.11 Hz" in reason
+    assert verdict(summary(diagnostics__slow_sway=[])).trusted is True  # none: nothing said

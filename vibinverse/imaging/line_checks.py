@@ -309,8 +309,8 @@ class Slow(LineNote):
         return (
             f"slow: {line.cycles:.0f} cycles in the record, its frequency known to about +-{line.df:.3g} Hz (1/T)"
             + (others if also else "")
-            + "; any slow change of a region (a sway, a shadow, a person walking, a drifting pixel) looks alike: "
-            "fit its cluster (fit --pixels) for the frequency and its interval"
+            + "; any slow change of a region (a sway, a shadow, a person walking, a drifting pixel) looks alike; "
+            "a fit of its cluster (fit --pixels) is not calibrated for so few cycles yet, and its verdict says so"
         )
 
 

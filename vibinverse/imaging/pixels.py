@@ -490,6 +490,18 @@ def cluster_lines(path: str | Path, cluster: int) -> list[float]:
     """The frequencies (Hz) of the vibration lines a detection map's cluster carries (its
     `cluster_lines`, less those whose `line_kind` says they are not vibration: frame patterns,
     frame-wide flicker...), strongest line first; [] when the map has none."""
+    return [f for f, kind, _ in carried_lines(path, cluster) if kind == VIBRATION]
+
+
+def cluster_slow_lines(path: str | Path, cluster: int) -> list[float]:
+    """The frequencies (Hz) of the slow lines (`line_slow`: 1-4 cycles per record, `slow_lines`)
+    claimed as vibration that a detection map's cluster carries; [] when none."""
+    return [f for f, kind, slow in carried_lines(path, cluster) if slow and kind == VIBRATION]
+
+
+def carried_lines(path: str | Path, cluster: int) -> list[tuple[float, str, bool]]:
+    """(frequency, kind, slow) of every line a detection map's cluster carries, strongest first
+    ([] when the map has no lines or no such cluster)."""
     import xarray as xr
 
     from vibinverse.io.series import check_file
@@ -502,11 +514,12 @@ def cluster_lines(path: str | Path, cluster: int) -> list[float]:
             carried = ds["cluster_lines"].sel(cluster_id=cluster).values
             freqs = np.asarray(ds["line_frequency"].values, dtype=float)
             kinds = [str(k) for k in ds["line_kind"].values] if "line_kind" in ds else ["vibration"] * freqs.size
+            slow = np.asarray(ds["line_slow"].values, dtype=bool) if "line_slow" in ds else np.zeros(freqs.size, bool)
     except KeyError:
         return []
     except (OSError, ValueError) as exc:
         raise DataError(f"pixels: cannot read the detection map {p}: {str(exc).splitlines()[0]}") from None
-    return [float(f) for f, c, k in zip(freqs, np.asarray(carried), kinds) if c and k == VIBRATION]
+    return [(float(f), k, bool(w)) for f, c, k, w in zip(freqs, np.asarray(carried), kinds, slow) if c]
 
 
 def band_gains(coef: np.ndarray, sigma: np.ndarray) -> np.ndarray:

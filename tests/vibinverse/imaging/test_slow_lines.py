@@ -13,6 +13,7 @@ from scipy import stats
 from scipy.special import erf
 
 from vibinverse.imaging.detection_map import detection_map
+from vibinverse.imaging.pixels import cluster_slow_lines
 from vibinverse.imaging.slow_lines import ROUNDING, gamma_through, has_power, log_gamma_tail, rim, series_flags
 
 CRANE, BRIDGE = (9.0, 24.0), (8.0, 30.0)  # (record length s, frames per second)
@@ -106,6 +107,31 @@ def test_regression_a_swaying_bar_is_claimed_at_its_frequency_and_reported_as_sl
     assert "slow: 2 cycles in the record" in (tmp_path / "lines.csv").read_text()
     for name, var in ds.data_vars.items():  # CF: units and long_name on every variable
         assert var.attrs.get("units") and var.attrs.get("long_name"), name
+    result.to_netcdf(tmp_path / "detection.nc")
+    (cluster,) = {c.cluster for c in line.clusters if c.n_pixels == max(d.n_pixels for d in line.clusters)}
+    assert cluster_slow_lines(tmp_path / "detection.nc", cluster) == [pytest.approx(line.frequency)]
+    others = [c for c in np.unique(ds["cluster"].values) if c >= 1 and c not in {d.cluster for d in line.clusters}]
+    assert all(cluster_slow_lines(tmp_path / "detection.nc", int(c)) == [] for c in others)
+
+
+@pytest.mark.slow
+def test_a_fit_of_a_slow_line_cluster_says_its_intervals_are_not_calibrated(tmp_path):
+    """`fit --pixels detection.nc:K` on the swaying bar's cluster (seed 11): diagnostics["slow_sway"]
+    holds detect's reading (2 cycles, 2/9 +- 1/9 Hz) and the verdict leaves trust undecided."""
+    import vibinverse as vi
+    from vibinverse.verdict import verdict
+
+    seconds, fps = CRANE
+    cube = sway_scene(np.random.default_rng(11), seconds=seconds, fps=fps)
+    result = detection_map(cube, workers=1)
+    (line,) = slow_lines(result)
+    result.to_netcdf(tmp_path / "detection.nc")
+    k = max(line.clusters, key=lambda c: c.n_pixels).cluster
+    fit = vi.fit(cube, pixels=f"{tmp_path / 'detection.nc'}:{k}", method="map")
+    (entry,) = fit.diagnostics["slow_sway"]
+    assert entry["cycles"] == pytest.approx(2.0) and entry["resolution"] == pytest.approx(1 / seconds)
+    v = verdict(fit.summary())
+    assert v.trusted is not True and any("slow line of 2 cycles" in r for r in v.reasons)
 
 
 @pytest.mark.parametrize(
