@@ -100,6 +100,7 @@ ROUNDING = 1e-10
 #: codec holds it, two spikes in adjacent shuffled frames leave no power near Nyquist (its last floor
 #: 0, its z 1e7 at a slow bin of time-shuffled real video)
 MIN_CHANGES = 32
+CHANGE_ROWS = 256  # `series_flags` compares this many samples at a time (a float64 diff of the batch would double it)
 #: the frame model's robust fit: the share of pixels left out as outliers, and the rounds
 TRIM, TRIM_ROUNDS = 0.2, 3
 N_OFFSET = 1  # the columns of `frame_model` before the motion's: an offset
@@ -166,7 +167,10 @@ def series_flags(y: np.ndarray, ends: tuple[float, float] | None) -> tuple[np.nd
     """(clipped, changes) of each series of y (time, pixels): whether it reaches either end of the
     range `ends` (None: no range, nothing clipped) in some sample (missing samples skipped), and in
     how many samples its value changes."""
-    changes = np.count_nonzero(np.diff(y, axis=0), axis=0).astype(np.int32)
+    changes = np.zeros(y.shape[1], dtype=np.int32)
+    for start in range(0, y.shape[0] - 1, CHANGE_ROWS):  # in slices of time: no copy of the batch
+        stop = min(start + CHANGE_ROWS, y.shape[0] - 1)
+        changes += np.count_nonzero(y[start + 1 : stop + 1] != y[start:stop], axis=0).astype(np.int32)
     if ends is None:
         return np.zeros(y.shape[1], dtype=bool), changes
     return (np.fmin.reduce(y, axis=0) <= ends[0]) | (np.fmax.reduce(y, axis=0) >= ends[1]), changes

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vibinverse.imaging.detection_map import detection_map
+from vibinverse.imaging.detection_map import DEFAULT_MEMORY, detection_map
 from vibinverse.io.cube import open_cube
 
 REALDATA = Path(__file__).resolve().parents[3].parent / "shared" / "realdata-dev"
@@ -87,3 +87,47 @@ def test_the_static_background_claims_no_slow_line(hz, fps):
     result = detection_map(open_cube(video(hz, fps), fps=fps).isel(x=slice(0, 250)), workers=2)
     assert slow_search_ran(result)
     assert [ln for ln in result.lines if ln.slow and ln.claimed] == []
+
+
+FORK_1728 = REALDATA / "tuningfork_video" / "hz32" / "fps500" / "tuning_hz32_fps500_50-1_640x420.mp4"
+LIMITED_RUN = """
+import json, resource, sys
+import numpy as np, xarray as xr
+from vibinverse.imaging.detection_map import DEFAULT_MEMORY, detection_map
+from vibinverse.io.cube import open_cube
+
+def vm_data():
+    return next(int(l.split()[1]) * 1024 for l in open("/proc/self/status") if l.startswith("VmData"))
+
+# warm up on a tiny cube: imports, dask's threads, BLAS and FFT buffers are the baseline
+t = np.arange(4096) / 200.0
+detection_map(xr.DataArray(np.zeros((4096, 2, 2), np.uint8), dims=("time", "y", "x"), coords={"time": t}), workers=2)
+limit = vm_data() + DEFAULT_MEMORY + int(sys.argv[3])
+resource.setrlimit(resource.RLIMIT_DATA, (limit, limit))
+found = detection_map(open_cube(sys.argv[1], fps=float(sys.argv[2])), workers=2)
+print(json.dumps({"claimed": [ln.frequency for ln in found.lines if ln.claimed]}))
+"""
+
+
+@pytest.mark.skipif(not FORK_1728.is_file(), reason=f"the real recordings are not here: {FORK_1728} is absent")
+def test_the_1728_frame_video_is_detected_within_the_default_memory_under_a_data_limit(tmp_path):
+    """Issue 44's real-size case: `detect` of the 640 x 420 x 1,728-frame take at the default --memory
+    in a process whose data segment (RLIMIT_DATA: every heap and anonymous mapping, counted as
+    reserved, which is more than resident) may grow by the budget + 300 MiB over its warmed-up
+    baseline: it finishes and claims the fork (measured resident: ~425 MB above the baseline); 64 MiB
+    over the baseline is not enough, so the limit binds."""
+    import json
+    import subprocess
+    import sys
+
+    script = tmp_path / "run.py"
+    script.write_text(LIMITED_RUN)
+    args = [sys.executable, str(script), str(FORK_1728), "500", str(300 * 2**20)]
+    r = subprocess.run(args, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    claimed = json.loads(r.stdout.strip().splitlines()[-1])["claimed"]
+    assert any(abs(f - F0) < 0.6 for f in claimed), claimed
+    # the limit binds: 64 MiB over the baseline is not enough
+    args[-1] = str(64 * 2**20 - DEFAULT_MEMORY)
+    r = subprocess.run(args, capture_output=True, text=True, timeout=900)
+    assert r.returncode != 0, r.stdout[-500:]
