@@ -45,12 +45,6 @@ def test_the_static_background_claims_no_line(fork):
     assert [ln for ln in result.lines if ln.claimed] == []
 
 
-def test_frames_shuffled_in_time_claim_no_line(fork):
-    frames = fork.load()
-    shuffled = frames.copy(data=frames.values[np.random.default_rng(1).permutation(frames.sizes["time"])])
-    assert detection_map(shuffled, workers=2).lines == []
-
-
 def test_every_claimed_line_of_the_fork_is_its_own(fork):
     result = detection_map(fork, workers=2)
     tol = 2 * float(result.maps.attrs["frequency_resolution_hz"])
