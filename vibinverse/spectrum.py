@@ -60,6 +60,74 @@ def sinusoid(t: np.ndarray, y: np.ndarray, f: float) -> tuple[float, float, np.n
     return float(np.hypot(coef[0], coef[1])), float(np.arctan2(-coef[1], coef[0])), curve
 
 
+#: records at least this long, on steady stamps without gaps, are scanned by `strongest_sinusoid`'s
+#: closed-form normal equations (the short ones sinusoid by sinusoid, as before)
+SCAN_MIN_SAMPLES = 20_000
+
+
+def _geometric(theta: np.ndarray, n: int) -> np.ndarray:
+    """sum_{k < n} e^{i theta k} per theta (n where e^{i theta} is 1)."""
+    e = np.exp(1j * theta)
+    den = 1.0 - e
+    flat = np.abs(den) < 1e-12
+    return np.where(flat, complex(n), (1.0 - np.exp(1j * n * theta)) / np.where(flat, 1.0, den))
+
+
+def strongest_sinusoid(t: np.ndarray, y: np.ndarray, freqs: np.ndarray) -> float:
+    """The frequency of `freqs` whose least-squares sinusoid (`sinusoid`) has the largest amplitude
+    (the first of equal ones; `sinusoid_amplitudes`)."""
+    return float(np.asarray(freqs, dtype=float)[int(np.argmax(sinusoid_amplitudes(t, y, freqs)))])
+
+
+def sinusoid_amplitudes(t: np.ndarray, y: np.ndarray, freqs: np.ndarray) -> np.ndarray:
+    """The amplitude of the least-squares sinusoid (`sinusoid`) at each of `freqs`. On a long record
+    on steady stamps without gaps and an evenly spaced grid, the 3 x 3 normal equations of every
+    grid frequency at once: the data's sums sum y e^{i w t_k} by one complex rotation of the
+    samples per grid step, the basis' sums by geometric series (a one-hour 200 Hz record: 0.11 s
+    for 41 frequencies against 1.2 s one by one); the same amplitudes to rounding, by `sinusoid`
+    where they are ill-conditioned."""
+    from vibinverse.io.file_basics import steady
+
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    freqs = np.asarray(freqs, dtype=float)
+    n = t.size
+    fast = (
+        n >= SCAN_MIN_SAMPLES
+        and freqs.size > 1
+        and bool(np.all(np.isfinite(y)))
+        and steady(t)
+        and np.allclose(np.diff(freqs), freqs[1] - freqs[0], rtol=1e-9, atol=0.0)
+    )
+    if not fast:
+        return np.array([sinusoid(t, y, f)[0] for f in freqs])
+    dt = (t[-1] - t[0]) / (n - 1)
+    k = np.arange(n)
+    omega = 2.0 * np.pi * freqs
+    rotated = y * np.exp(1j * (omega[0] * dt) * k)
+    step = np.exp(1j * (2.0 * np.pi * (freqs[1] - freqs[0]) * dt) * k)
+    data = np.empty(freqs.size, dtype=complex)  # sum_k y_k e^{i w (t_k - t_0)}
+    for j in range(freqs.size):
+        data[j] = rotated.sum()
+        if j + 1 < freqs.size:
+            rotated *= step
+    shift = np.exp(1j * omega * t[0])
+    xy = shift * data  # sum y cos + i sum y sin
+    s1 = shift * _geometric(omega * dt, n)  # sum cos + i sum sin
+    s2 = shift**2 * _geometric(2.0 * omega * dt, n)  # sum e^{2 i w t_k}
+    total = float(y.sum())
+    amps = np.empty(freqs.size)
+    for j in range(freqs.size):
+        cc, ss, cs = 0.5 * (n + s2[j].real), 0.5 * (n - s2[j].real), 0.5 * s2[j].imag
+        gram = np.array([[cc, cs, s1[j].real], [cs, ss, s1[j].imag], [s1[j].real, s1[j].imag, float(n)]])
+        if np.linalg.cond(gram) < 1e8:
+            coef = np.linalg.solve(gram, np.array([xy[j].real, xy[j].imag, total]))
+            amps[j] = float(np.hypot(coef[0], coef[1]))
+        else:
+            amps[j] = sinusoid(t, y, float(freqs[j]))[0]
+    return amps
+
+
 def harmonics(t: np.ndarray, y: np.ndarray, f: float, nyq: float) -> tuple[tuple[float, float], tuple[float, float]]:
     """(amplitude, phase) of y's sinusoids at f and 2f (2f at or above Nyquist: (0, 0))."""
     return sinusoid(t, y, f)[:2], (sinusoid(t, y, 2 * f)[:2] if 2 * f < nyq else (0.0, 0.0))

@@ -154,7 +154,7 @@ def _speed_run(result: dict[str, Any]) -> str:
     side = f"{round(sub**0.5)}²" if sub else "?"
     return (
         f"This run: {'`vibinverse bench --quick`' if quick else '`vibinverse bench`'}, references at {side} "
-        f"subpixels{', without the demo MCMC and the long-record fit (the full run measures them)' if quick else ''}."
+        f"subpixels{', without the demo MCMC and the long-record fits (the full run measures them)' if quick else ''}."
     )
 
 

@@ -661,3 +661,45 @@ def test_a_line_next_to_a_resonance_pays_the_look_elsewhere_term_of_the_band_it_
     fitted = vi.fit(series, method="map").summary()
     assert fitted["parameters"]["lines[0].frequency"]["prior_bounds"] == pytest.approx([lo, hi])
     assert fitted["diagnostics"]["line_0_detected"] is True
+
+
+def test_search_bins_groups_long_records_and_keeps_narrow_peaks_resolved(monkeypatch):
+    """`search_bins`: 1 on a record of too few ordinates (or the Kalman filter's), as many as
+    leave SEARCH_GROUPS groups on a long one, fewer where a start's resonance is narrow (its
+    half-width zeta f x span over GROUPS_PER_HALF_WIDTH)."""
+    import vibinverse.model_order as mo
+    from vibinverse.io.series import Series
+    from vibinverse.models.modal import ModalModel
+
+    t, y = simulate(80_000, modes=[(3.0, 0.05, 1.0)], sigma=0.3, seed=2, sub=1)
+    model = ModalModel({"modal": {"modes": 1}}, Series(t, y, "long"))
+    start = {"modes[0].frequency": 3.0, "modes[0].damping_ratio": 0.05}
+    assert mo.search_bins(model, [start]) == 1  # 39,930 ordinates: under 2 x SEARCH_GROUPS
+    monkeypatch.setattr(mo, "SEARCH_GROUPS", 2000)
+    assert mo.search_bins(model, [start]) == 19  # the cap; the half-width spans 600 ordinates
+    narrow = {"modes[0].frequency": 3.0, "modes[0].damping_ratio": 0.002}  # 24 ordinates
+    assert mo.search_bins(model, [start, narrow]) == 2
+    assert mo.search_bins(model, [{**narrow, "modes[0].damping_ratio": 1e-4}]) == 1
+    short = ModalModel({"modal": {"modes": 1}}, Series(t[:5000], y[:5000], "short"))
+    assert short.spectral is None and mo.search_bins(short, [start]) == 1
+
+
+def test_a_search_in_groups_chooses_what_the_search_on_every_ordinate_chooses(monkeypatch):
+    """A 30,000-sample record (a mode, a line, a random walk, white noise), its search with the
+    ordinates grouped (up to 7 at a time: SEARCH_GROUPS lowered to reach this length) and orders
+    compared by Whittle's ln L, and its search on every ordinate compared by the Kalman filter's:
+    the same order, and the same optimum to well within its uncertainty."""
+    import vibinverse.model_order as mo
+
+    t, y = simulate(30_000, modes=[(3.0, 0.03, 1.0)], lines=[(7.3, 0.25, 0.4)], drift=0.05, sigma=0.5, seed=5)
+    series = vi.series(t, y)
+    exact = choose_order(series)
+    monkeypatch.setattr(mo, "SEARCH_GROUPS", 2000)
+    grouped = choose_order(series)
+    assert grouped.fit.spec == exact.fit.spec
+    assert exact.fit.spec.modes == 1 and exact.fit.spec.lines == 1 and exact.fit.spec.drifting
+    for name in ("modes[0].frequency", "modes[0].damping_ratio", "lines[0].frequency", "lines[0].amplitude"):
+        assert grouped.fit.values[name] == pytest.approx(exact.fit.values[name], rel=0.02), name
+    # orders compared by Whittle's ln L there (`compared_log_likelihood`): the filter's at both optima
+    model = exact.fit.model
+    assert abs(model.exact_log_likelihood(grouped.fit.values) - exact.fit.log_likelihood) < 2.0

@@ -71,3 +71,27 @@ def test_frame_guesses_on_jittered_stamps_find_the_drive_and_the_resonance():
     best = model.guesses({n: p.bounds for n, p in zip(prob.space.names, prob.space.priors)})[0]
     assert best[K + "drive_frequency"] == pytest.approx(10.0, abs=0.01)
     assert best[K + "tilt_frequency"] == pytest.approx(2 * np.sqrt(3), rel=0.1)
+
+
+@pytest.mark.parametrize("n", [30_001, 20_000, 999])
+def test_sinusoid_amplitudes_on_a_grid_are_the_sinusoids_one_by_one(n):
+    """The scan's amplitudes (closed-form normal equations on a long steady record, `sinusoid`
+    one by one on a short one) equal `sinusoid`'s at each grid frequency to 1e-9, on stamps that
+    do not start at 0, with an offset, a line between grid points and one ill-conditioned frequency
+    (under a cycle in the record: to 1e-6); a gap takes the one-by-one path, and the strongest is the first
+    maximum."""
+    from vibinverse.spectrum import sinusoid, sinusoid_amplitudes, strongest_sinusoid
+
+    rng = np.random.default_rng(n)
+    t = 12.345 + np.arange(n) / 200.0
+    y = 0.4 * np.cos(2 * np.pi * 7.40312 * t + 0.7) + rng.normal(size=n) + 3.0
+    span = t[-1] - t[0]
+    grid = np.linspace(7.40312 - 1 / span, 7.40312 + 1 / span, 41)
+    # under a cycle the normal equations are ill-conditioned (cond up to ~1e7): rounding grows with it
+    for freqs, rtol in ((grid, 1e-9), (np.linspace(0.05 / span, 0.5 / span, 5), 1e-6)):
+        one_by_one = np.array([sinusoid(t, y, f)[0] for f in freqs])
+        np.testing.assert_allclose(sinusoid_amplitudes(t, y, freqs), one_by_one, rtol=rtol)
+    assert strongest_sinusoid(t, y, grid) == grid[int(np.argmax([sinusoid(t, y, f)[0] for f in grid]))]
+    gappy = y.copy()
+    gappy[n // 3] = np.nan
+    np.testing.assert_array_equal(sinusoid_amplitudes(t, gappy, grid[:3]), [sinusoid(t, gappy, f)[0] for f in grid[:3]])

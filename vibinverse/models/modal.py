@@ -70,6 +70,7 @@ differences of the exact log-likelihood with steps of a tenth of each parameter'
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import threading
 from dataclasses import dataclass
@@ -319,14 +320,22 @@ def _lines_mean(t, level, f, a, ph, out):  # pragma: no cover - compiled
         out[k] = acc
 
 
-def whittle_engine(series: Series, gaps: bool, gain: bool, integrated: bool) -> Periodogram | None:
+def whittle_engine(series: Series, gaps: bool, gain: bool, integrated: bool, bins: int = 1) -> Periodogram | None:
     """Whittle's engine (on the record's first differences) for a long record without gaps whose
     steps are steady (`steady`: read on the regular grid from its first to its last stamp), for a
     model without a gain drift or an integrated walk; None: the Kalman filter's exact likelihood.
-    Long: at least `WHITTLE_MIN_SAMPLES` samples."""
+    Long: at least `WHITTLE_MIN_SAMPLES` samples. `bins` > 1: the ordinates grouped (`Periodogram`)."""
     if gaps or gain or integrated or series.time.size < WHITTLE_MIN_SAMPLES or not steady(series.time):
         return None
-    return Periodogram(series.time.size, 1)
+    return periodogram(series.time.size, bins)
+
+
+@functools.lru_cache(maxsize=4)
+def periodogram(n: int, bins: int) -> Periodogram:
+    """The differences' `Periodogram` of a record of n samples (its ordinates grouped `bins` at a
+    time), shared: the order search builds dozens of models of one record (14 ms each at 720,000
+    samples), and a periodogram is never changed after it is made."""
+    return Periodogram(n, 1, bins)
 
 
 def wrap_phase(phase: float) -> float:
@@ -375,12 +384,17 @@ def smooth(power: np.ndarray, width: int) -> np.ndarray:
 
 
 def spectral_peaks(
-    freqs: np.ndarray, power: np.ndarray, band: tuple[float, float], width: int, separation: float
+    freqs: np.ndarray,
+    power: np.ndarray,
+    band: tuple[float, float],
+    width: int,
+    separation: float,
+    limit: int | None = None,
 ) -> list[tuple[float, float]]:
     """Local maxima of the smoothed power inside `band`, strongest first, at least `separation` Hz
-    apart: (frequency, smoothed power / median smoothed power). The first and last bins count as
-    maxima when they exceed their one neighbour: a sway of 1-2 cycles in the record peaks in the
-    first Fourier bin (`spectrum` starts at one cycle per record)."""
+    apart, the first `limit` (None: all): (frequency, smoothed power / median smoothed power). The
+    first and last bins count as maxima when they exceed their one neighbour: a sway of 1-2 cycles
+    in the record peaks in the first Fourier bin (`spectrum` starts at one cycle per record)."""
     sm = smooth(power, width)
     sel = (freqs >= band[0]) & (freqs <= band[1])
     floor = float(np.median(sm[sel])) if sel.any() else 1.0
@@ -390,6 +404,8 @@ def spectral_peaks(
     peaks.sort(key=lambda i: -sm[i])
     out: list[tuple[float, float]] = []
     for i in peaks:
+        if limit is not None and len(out) >= limit:
+            break
         if all(abs(freqs[i] - f) >= separation for f, _ in out):
             out.append((float(freqs[i]), float(sm[i] / max(floor, 1e-300))))
     return out
@@ -534,15 +550,16 @@ class ModalModel(SignalModel):
         self._base_values: dict[str, float] | None = None
         self.start_engine()
 
-    def start_engine(self) -> None:
-        """Whittle's engine for this model's record (`whittle_engine`; None: the Kalman filter's),
-        with its caches emptied: the differences' periodogram without lines, the leading samples
-        that carry the level and their mean (`_whittle`)."""
+    def start_engine(self, bins: int = 1) -> None:
+        """Whittle's engine for this model's record (`whittle_engine`, its ordinates grouped `bins`
+        at a time; None: the Kalman filter's), with its caches emptied: the differences' periodogram
+        without lines, the leading samples that carry the level and their mean (`_whittle`)."""
         self.spectral = whittle_engine(
             self.series,
             not bool(self.good.all()),
             bool(self.spec.gain),
             bool(np.any(self.kinds == INTEGRATED_WALK_FORM)),
+            bins,
         )
         self._power: np.ndarray | None = None
         self._transform: np.ndarray | None = None
@@ -755,8 +772,9 @@ class ModalModel(SignalModel):
 
     def exact_log_likelihood(self, values: dict[str, float]) -> float:
         """The Kalman filter's exact log-likelihood, whichever engine `log_likelihood` uses: what
-        the order search compares (`model_order.fit_order`), so that orders fitted by Whittle's
-        likelihood and orders only the filter can run (a gain drift) are judged alike."""
+        the order search compares (`model_order.compared_log_likelihood`; Whittle's on a record long
+        enough to be grouped), so that orders fitted by Whittle's likelihood and orders only the
+        filter can run (a gain drift) are judged alike."""
         if not self._inside(values):
             return -math.inf
         ll = self._run(values, np.empty(0), np.empty(0))
@@ -787,7 +805,7 @@ class ModalModel(SignalModel):
             power = self._rest_without_lines(theta, psi, amp)[1]
         else:  # a constant mean: the differences' periodogram is the record's, computed once
             if self._power is None:
-                self._power = self.spectral.of(self.y)
+                self._power = self.spectral.reduce(self.spectral.of(self.y))
             power = self._power
         blocks = (self.block_starts, self.block_sizes)
         v0 = float(self.h @ p0 @ self.h) + r  # the stationary part's variance (the walk's P0 is 0)
@@ -839,17 +857,14 @@ class ModalModel(SignalModel):
         else:
             theta = psi = amp = np.zeros(0)
             if self._power is None:
-                self._power = sp.of(self.y)
+                self._power = sp.reduce(sp.of(self.y))
             rest, power = None, self._power
         v0 = float(h @ p0 @ h) + r
         density = sp.density(phi, q, h, r, starts, sizes, stationary_variance=v0)
-        w = np.ones(density.size)
-        if sp.nyquist:
-            w[-1] = 0.5
-        inverse = w / density
+        inverse = sp.group_weights / density
         slope = inverse * (power / density - 1.0)  # d ln L / d f_j
         ends = 2.0 / sp.m if sp.differences else 0.0  # d f_j / d v0 (every ordinate)
-        gain = sp.c if sp.differences else np.ones(density.size)  # d f_j / d r
+        gain = sp.group_c if sp.differences else np.ones(density.size)  # d f_j / d r
         f0 = sp.zero_density(phi, q, h, r, starts, sizes)
         walk = walk_step_variance(phi, q, h, starts, sizes)
         if self._level_window is None:
@@ -882,8 +897,9 @@ class ModalModel(SignalModel):
             return np.array([a[0, 0], a[0, 1], a[1, 0], a[1, 1], c[0, 0], c[0, 1], c[1, 1]])
 
         if rest is not None:
-            weighted_re = np.ascontiguousarray(inverse * rest.real)
-            weighted_im = np.ascontiguousarray(inverse * rest.imag)
+            on_ordinates = sp.ordinate_inverse(density, inverse)
+            weighted_re = np.ascontiguousarray(on_ordinates * rest.real)
+            weighted_im = np.ascontiguousarray(on_ordinates * rest.imag)
             grid = (self.t[-1] - self.t[0]) / (self.t.size - 1)  # `_line_phasors`' theta = 2 pi f grid
         lines: dict[int, np.ndarray] = {}  # d ln L / d (amp, theta / amp, psi / amp), per line
         out: dict[str, float] = {}
@@ -981,7 +997,7 @@ class ModalModel(SignalModel):
         # kept: this call's lines and the last call's (a step and the point it steps from)
         last = cached[0] if cached is not None else ()
         self._line_parts = {k: parts[k] for k in (*last, *keys) if k in parts}
-        power = self.spectral.power(rest)
+        power = self.spectral.reduce(self.spectral.power(rest))
         self._lines_power = (keys, power, rest)
         return rest, power
 
@@ -1028,6 +1044,12 @@ class ModalModel(SignalModel):
         out = np.empty(self.t.size)
         self._run(values, out, np.empty(0))
         return out
+
+    def filtered(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+        """(`residuals`, `pointwise_log_likelihood`) from one pass of the filter."""
+        white, lls = np.empty(self.t.size), np.empty(self.t.size)
+        self._run(values, white, lls)
+        return white, lls
 
     def replicate(self, values: dict[str, float], rng: np.random.Generator) -> np.ndarray:
         """A draw of the model at the data's stamps (states started in their stationary law, the
@@ -1133,8 +1155,10 @@ class ModalModel(SignalModel):
         # a drift, a gain drift or a coloured noise puts its power at low frequencies, the first
         # bin's above all: the peaks are searched over its background there (`background`)
         ranked = power / background(freqs, power) if s.drifting or s.coloured or s.gain else power
-        peaks = spectral_peaks(freqs, ranked, (first, nyq * 0.999), width, separation=3 * width * (freqs[1] - freqs[0]))
         need = s.modes + s.lines
+        peaks = spectral_peaks(
+            freqs, ranked, (first, nyq * 0.999), width, separation=3 * width * (freqs[1] - freqs[0]), limit=need
+        )
         while len(peaks) < need:  # fewer peaks than components: spread the rest over the band
             peaks.append((lo + (nyq - lo) * (len(peaks) + 1) / (need + 1), 1.0))
         picked = [f for f, _ in peaks[:need]]
@@ -1156,7 +1180,7 @@ class ModalModel(SignalModel):
             **dict(zip(gain_names(s.gain), map(float, self.gain_start()))),
         }
         out = []
-        from vibinverse.spectrum import sinusoid
+        from vibinverse.spectrum import sinusoid, strongest_sinusoid
 
         y0 = self.y - np.nanmean(self.y)
         for assign in assignments:
@@ -1170,7 +1194,7 @@ class ModalModel(SignalModel):
                 i = int(np.argmin(np.abs(freqs - f)))  # the highest raw bin near the smoothed peak
                 i = max(i - width, 0) + int(np.argmax(power[max(i - width, 0) : i + width + 1]))
                 fine = np.linspace(max(freqs[max(i - 1, 0)], lo), max(freqs[min(i + 1, freqs.size - 1)], lo), 21)
-                best = max(fine, key=lambda ff: sinusoid(self.t, y0, ff)[0])
+                best = strongest_sinusoid(self.t, y0, fine)
                 a, ph, _ = sinusoid(self.t, y0, best)
                 g[f"lines[{j}].frequency"], g[f"lines[{j}].amplitude"], g[f"lines[{j}].phase"] = float(best), a, ph
             out.append({k: g[k] for k in self._names})

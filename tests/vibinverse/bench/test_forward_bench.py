@@ -47,3 +47,23 @@ def test_the_long_three_mode_row_fits_the_case_and_says_how(monkeypatch):
     assert row["max_frequency_error"] < 0.01 and row["intervals_hold_truth"]
     assert row["approximation"] == "importance" and row["wall_s"] > 0
     assert {"model_order_s", "importance_s"} <= set(row["timing"])
+
+
+def test_the_hour_record_is_what_its_row_says():
+    """`hour_record`: one hour at 200 Hz, the three modes of HOUR_MODES as its truth, the first
+    differences of the record carrying the walk's and the white noise's variance (plus the modes'
+    share), and a table that prints the hour row beside the three-mode row ("-" when skipped)."""
+    import numpy as np
+
+    from vibinverse.bench.forward_bench import table
+    from vibinverse.bench.likelihood_bench import HOUR_MODES, HOUR_SIGMA, HOUR_WALK, hour_record
+
+    data = hour_record(0)
+    assert data.time.size == 720_000 and np.allclose(np.diff(data.time), 0.005)
+    assert [(m["frequency"], m["damping_ratio"], m["rms"]) for m in data.truth["modes"]] == list(HOUR_MODES)
+    # over a step of 5 ms each mode moves little: the differences are walk + twice the white noise
+    diff_var = float(np.var(np.diff(data.intensity)))
+    expected = HOUR_WALK**2 * 0.005 + 2 * HOUR_SIGMA**2
+    assert expected < diff_var < 1.2 * expected
+    text = table({"long_modal_fit": None, "hour_fit": None})
+    assert "a one-hour 200 Hz record (three modes, random-walk drift): - (skipped with --quick)" in text
