@@ -129,7 +129,9 @@ DEFAULT_MEMORY = 512 * 2**20  # bytes: the chunks in flight and their float64 wo
 # float64 work per pixel and time sample in a batch (series, spectra, floor), measured with tracemalloc:
 # 29 bytes with the rfft, 85 with nifty-ls (its oversampled NUFFT grid)
 WORK_BYTES_PER_SAMPLE = {True: 32, False: 96}  # keyed by uniform stamps
-LINE_MAP_VALUES = 2**21  # `line_maps` whitens this many powers at a time (16 MB of float64 a work array)
+LINE_MAP_VALUES = 2**21  # `line_maps` whitens at most this many powers at a time (16 MB of float64 a work array)
+LINE_MAP_ARRAYS = 8  # ... and at most memory / (8 bytes x this) (its work arrays and whitening's temporaries)
+LINE_MAP_FEWEST = 2**14  # ... and at least this many
 LINE_BINS = 1  # a pixel's SNR at a line: its largest z within this many bins of the line's bin
 MERGE_GAP = 2  # line frequencies at most 2 bins apart are one line (a damped resonance's hump dips between)
 MIN_CHUNK_PIXELS = 64  # smaller blocks cost more in scheduling than they save
@@ -290,15 +292,16 @@ def slab_sums(
 
 
 def line_maps(
-    power: np.ndarray, floor: Floor, grid: FrequencyGrid, bins: tuple[int, ...]
+    power: np.ndarray, floor: Floor, grid: FrequencyGrid, bins: tuple[int, ...], memory: float = DEFAULT_MEMORY
 ) -> tuple[np.ndarray, np.ndarray]:
     """(snr, frequency) (line, pixels) from the pixels' powers (pixels, K) at `line_bins`' bins and
     their floors: per line, each pixel's largest z within LINE_BINS of the line's bin and the
-    frequency there, refined by the parabola through ln P at it and its neighbours."""
+    frequency there, refined by the parabola through ln P at it and its neighbours. The pixels are
+    whitened a slab at a time, its work arrays within `memory` (bytes; `line_map_values`)."""
     near, cols = line_bins(grid, bins)
     snr = np.zeros((len(bins), power.shape[0]))
     freq = np.zeros((len(bins), power.shape[0]))
-    step = max(1, LINE_MAP_VALUES // max(cols.size, 1))  # pixels at a time: the work arrays stay small
+    step = max(1, line_map_values(memory) // max(cols.size, 1))  # pixels at a time: the work arrays stay small
     for start in range(0, power.shape[0], step):
         sl = slice(start, min(start + step, power.shape[0]))
         z = floor.take(sl).whiten(power[sl], grid, cols)
@@ -313,6 +316,14 @@ def line_maps(
             around = [log_p[rows, np.searchsorted(cols, np.clip(idx + d, 0, grid.n_freq - 1))] for d in (-1, 0, 1)]
             freq[k, sl] = (idx + 1 + np.where(inner, refine(np.stack(around)), 0.0)) * grid.df
     return snr, freq
+
+
+def line_map_values(memory: float) -> int:
+    """How many powers `line_maps` whitens at a time: LINE_MAP_VALUES, fewer where `memory` (bytes)
+    would not hold LINE_MAP_ARRAYS float64 arrays of them (a 24 MiB budget: 393,216 values, not 2**21:
+    its work arrays took a process limited to 64 MiB above its baseline over the limit), at least
+    LINE_MAP_FEWEST."""
+    return int(min(LINE_MAP_VALUES, max(LINE_MAP_FEWEST, int(memory) // (8 * LINE_MAP_ARRAYS))))
 
 
 def _whole(block: Any) -> np.ndarray:
@@ -832,7 +843,7 @@ def detection_map(
                 power = power.reshape(n_pixels, -1)
             else:
                 power = _line_powers(run, data, blocks, grid, cols, plan, maps["mean_frame"], memory, spilled)
-            snr, freq = (m.reshape(len(bins), ny, nx) for m in line_maps(power, floor, grid, bins))
+            snr, freq = (m.reshape(len(bins), ny, nx) for m in line_maps(power, floor, grid, bins, memory))
             snr[:, changes < MIN_CHANGES] = 0.0  # too few events to carry a line (`first_pass`)
             how = "from the kept spectra" if keep_spectra else "second pass"
             logger.debug(f"detect: SNR maps of {len(bins)} lines, {how}: {time.perf_counter() - clock:.2f} s")
