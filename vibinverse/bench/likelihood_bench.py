@@ -221,14 +221,14 @@ HOUR_MODES = ((3.1, 0.01, 1.0), (7.4, 0.015, 0.6), (12.9, 0.02, 0.4))
 HOUR_WALK, HOUR_SIGMA, HOUR_LEVEL = 0.0707, 0.5, 2.0
 
 
-def hour_record(seed: int = 0):
-    """One hour at 200 Hz (720,000 samples): the modes `HOUR_MODES` (each propagated exactly from
-    stamp to stamp, `robustness_cases.oscillator`), a random-walk drift of rate HOUR_WALK, white
-    noise HOUR_SIGMA, as a `robustness_cases.Dataset` with its truth."""
+def hour_record(seed: int = 0, duration: float = 3600.0):
+    """One hour (`duration` s) at 200 Hz (720,000 samples): the modes `HOUR_MODES` (each propagated
+    exactly from stamp to stamp, `robustness_cases.oscillator`), a random-walk drift of rate
+    HOUR_WALK, white noise HOUR_SIGMA, as a `robustness_cases.Dataset` with its truth."""
     from vibinverse.bench.robustness_cases import Dataset, Mode, oscillator
 
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 3600]))
-    t = np.arange(720_000) / 200.0
+    t = np.arange(round(200.0 * duration)) / 200.0
     modes = [Mode(*m) for m in HOUR_MODES]
     y = HOUR_LEVEL + sum(oscillator(t, m, rng) for m in modes)
     y = y + np.concatenate([[0.0], np.cumsum(rng.normal(0.0, HOUR_WALK * math.sqrt(0.005), t.size - 1))])

@@ -237,20 +237,19 @@ def test_a_failed_fit_is_recorded_but_an_interrupt_stops_the_bench(monkeypatch):
 
 
 @pytest.mark.slow
-def test_one_data_set_of_two_cases_through_the_scorer(tmp_path):
-    """clean and gaps, seed 0, every fitter (~40 s): rows for each, the modal fit without drive amplitude,
-    the records file scores to the same rows, the table names the chosen terms."""
+def test_one_data_set_of_a_case_through_the_scorer(tmp_path):
+    """clean, seed 0, every fitter: rows for each, the modal fit without drive amplitude, the records
+    file scores to the same rows, the table names the chosen terms (the frame likelihood with gaps:
+    `tests/vibinverse/models/test_frame.py`)."""
     records = tmp_path / "fits.jsonl"
-    res = rs.run(n=1, cases=["clean", "gaps"], records=records)
+    res = rs.run(n=1, cases=["clean"], records=records)
     rows = res["rows"]
-    assert {(r["case"], r["method"]) for r in rows} == {(c, m) for c in ("clean", "gaps") for m in rs.FITTERS}
+    assert {(r["case"], r["method"]) for r in rows} == {("clean", m) for m in rs.FITTERS}
     assert all(r["n_failed"] == 0 for r in rows), res["notes"]
     tilt = [r for r in rows if r["param"] == "tilt frequency"]
     assert all(r["median_rel_error"] < 0.05 for r in tilt)
     assert not any(r["param"] == "drive amplitude" for r in rows if r["method"] == "ours")
-    assert rs.rows_from_fits(rs.read_records(records), ["clean", "gaps"], list(rs.FITTERS)) == json.loads(
-        json.dumps(rows)
-    )
+    assert rs.rows_from_fits(rs.read_records(records), ["clean"], list(rs.FITTERS)) == json.loads(json.dumps(rows))
     text = rs.table(res)
     assert "terms chosen by ours-scene on clean" in text
     json.dumps(res)
