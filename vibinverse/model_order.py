@@ -306,7 +306,7 @@ def fit_order(
     if best is None or not math.isfinite(best[0]) or best[0] <= -1e299:
         raise NumericalError(f"model order: no finite likelihood for {spec}")
     # orders are compared by the exact ln L at their optimum, whichever engine found it
-    ll = best[0] if model.spectral is None else compared_log_likelihood(model, best[1])
+    ll = best[0] if model.spectral is None else model.exact_log_likelihood(best[1])
     return OrderFit(spec, model, best[1], ll, len(names), model.n_obs, windows)
 
 
@@ -314,20 +314,6 @@ def groupable(model: ModalModel) -> bool:
     """Whether the record is long enough for the search to group its ordinates (`search_bins`):
     Whittle's engine with at least 2 x SEARCH_GROUPS ordinates (~131,000 samples)."""
     return model.spectral is not None and (model.spectral.m // 2) // SEARCH_GROUPS >= 2
-
-
-def compared_log_likelihood(model: ModalModel, values: dict[str, float]) -> float:
-    """The ln L by which the search compares orders at their optimum: the Kalman filter's exact one
-    (`ModalModel.exact_log_likelihood`), so that orders fitted by Whittle's likelihood and orders
-    only the filter runs (a gain drift) are judged alike; on a record long enough to be grouped
-    (`groupable`) Whittle's, on every ordinate: there every order runs Whittle's engine (a gain
-    drift is not searched on a long record), and the filter's pass costs ~18 Whittle likelihoods
-    (143 against 8 ms at 720,000 samples: the most of such a search's time)."""
-    if not groupable(model):
-        return model.exact_log_likelihood(values)
-    if model.spectral.bins != 1:
-        model.start_engine(1)
-    return model.log_likelihood(values)
 
 
 def search_bins(model: ModalModel, starts: list[dict[str, float]]) -> int:
