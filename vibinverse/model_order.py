@@ -353,11 +353,10 @@ class Candidate:
     new: list[str]
 
 
-def innovations(fit: OrderFit, filtered: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-    """The one-step prediction errors in intensity units (NaN at gaps): standardized residual x
-    sqrt(innovation variance), the variance recovered from the pointwise log density (`filtered`:
-    the model's (residuals, pointwise log densities) at the fit's values, when at hand)."""
-    e, lk = fit.model.filtered(fit.values) if filtered is None else filtered
+def innovations(e: np.ndarray, lk: np.ndarray) -> np.ndarray:
+    """The one-step prediction errors in intensity units (NaN at gaps) from a model's standardized
+    residuals `e` and pointwise log densities `lk` (`ModalModel.filtered`): e x sqrt(innovation
+    variance), the variance recovered from the log density."""
     s = np.exp(-2.0 * lk - math.log(2.0 * math.pi) - e * e)
     return e * np.sqrt(s)
 
@@ -372,12 +371,11 @@ def candidates(
     dt = float(model.steps[0]) if model.steps.size == 1 else series.dt
     span = max(model.span, dt)
     lo, nyq = cycles / span, 0.5 / dt
-    filtered = model.filtered(values)
-    e = filtered[0]
+    e, lk = model.filtered(values)
     freqs, power = spectrum(e, dt, model.t)
     band = (freqs >= lo) & (freqs < 0.999 * nyq)
     out: list[Candidate] = []
-    v = innovations(fit, filtered)
+    v = innovations(e, lk)
     vf, vp = spectrum(v, dt, model.t)
     floor = float(np.median(vp[band])) / math.log(2.0)
     sigma = noise_rms(values)
