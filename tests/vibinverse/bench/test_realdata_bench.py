@@ -215,17 +215,21 @@ def test_a_row_without_an_answer_says_so_in_the_table_and_the_figure(tmp_path):
 # ----------------------------------------------------------------------------------- end to end
 @pytest.mark.slow
 @needs_corpus
-def test_the_250_fps_take_of_the_32_hz_fork_runs_end_to_end(tmp_path, monkeypatch):
+def test_the_250_fps_take_of_the_128_hz_fork_runs_end_to_end_and_finds_its_line(tmp_path, monkeypatch):
+    """detect, then the joint fit of the strongest line's largest cluster, as the bench runs them:
+    both steps finish and find the fork (at 250 fps it shows at its alias, 122 Hz). The 128 Hz take:
+    its fit is the quick one (~16 s; the 32 Hz take's ~50 s)."""
     monkeypatch.setenv(rc.ENV, str(CORPUS))
-    result = rb.run(quick=True, cases=["tuningfork_32hz_video"], workers=1)
+    result = rb.run(quick=True, cases=["tuningfork_128hz_video"], workers=1)
     rows = result["rows"]
     assert [(r["case"], r["file"], r["stage"]) for r in rows] == [
-        ("tuningfork_32hz_video", "fps250", "detect"),
-        ("tuningfork_32hz_video", "fps250", "fit"),
+        ("tuningfork_128hz_video", "fps250", "detect"),
+        ("tuningfork_128hz_video", "fps250", "fit"),
     ]
-    assert all(r["status"] in ("ok", "timeout", "error", "skipped") for r in rows)
+    for r in rows:
+        assert r["status"] == "ok" and len(r["found"]) == 1, (r["stage"], r["status_text"], r["found"])
     text = rb.table(result)
-    assert "tuningfork_32hz_video" in text and "fps250" in text
+    assert "tuningfork_128hz_video" in text and "fps250" in text
     rb.plot(result, tmp_path / "realdata.png")
     assert (tmp_path / "realdata.png").stat().st_size > 5_000
 

@@ -334,10 +334,14 @@ MEMORY_RUN = textwrap.dedent(
 @pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_DATA and /proc: Linux")
 def test_a_cube_several_times_the_memory_given_is_processed(tmp_path):
-    """A 256 MiB float32 cube (its float64 copy: 512 MiB) read from netCDF by a process whose data
-    segment may grow by 64 MiB only (RLIMIT_DATA over the measured baseline): it runs, and its maps
-    equal those of an unlimited run on a subset of rows. The same limit stops a run told it has
-    2 GiB (whose blocks and slabs, sized for it, do not fit), so the limit does bind."""
+    """A 256 MiB float32 cube (its float64 copy: 512 MiB) read from netCDF by a process told it has
+    24 MiB, whose data segment may grow by 96 MiB only (RLIMIT_DATA over the measured baseline): it
+    runs, and its maps equal those of an unlimited run on a subset of rows. The same limit stops a
+    run told it has 2 GiB (whose blocks and slabs, sized for it, do not fit), so the limit does bind.
+    Why 96: beside the 24 MiB of blocks and slabs, the file's 32 MiB time pieces being read and
+    glibc's per-thread arenas (2 workers) take the data segment to 71-73 MiB over the baseline
+    without a limit (52-54 with one arena, MALLOC_ARENA_MAX=1); under a 64 MiB limit the run passed
+    only when freed arena memory was reused in time (it failed about one CI run in three)."""
     rng = np.random.default_rng(12)
     nt, ny, nx = 4096, 128, 128
     t = np.arange(nt) / 200.0
@@ -347,8 +351,8 @@ def test_a_cube_several_times_the_memory_given_is_processed(tmp_path):
     path = tmp_path / "big.nc"
     cube = cube_of(data, t)
     cube.to_netcdf(path, engine="h5netcdf")
-    head = 64 * 2**20
-    assert data.nbytes >= 4 * head
+    head = 96 * 2**20
+    assert data.nbytes >= 2.5 * head
     script = tmp_path / "run.py"
     script.write_text(MEMORY_RUN)
 
