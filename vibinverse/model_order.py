@@ -8,7 +8,9 @@ Greedy forward selection by the Bayesian information criterion
 It starts from white noise plus a level. At each step it looks at the spectrum of the current
 model's standardized one-step residuals (innovations: white where the model describes the data; on
 irregular stamps a Lomb-Scargle periodogram at the stamps themselves) and proposes, at its strongest
-peak, a resonance (the peak of the smoothed residual spectrum) and a line (its highest bin); the
+peak, a resonance (the peak of the smoothed residual spectrum; when that peak is slow, under 10
+cycles in the record, as a trend not yet described makes it, also one at the strongest peak over
+the spectrum's background, `mode_peaks`) and a line (its highest bin); the
 broadest mode split in two when its damping ratio exceeds 0.05 (`split_candidates`: two close modes
 fitted as one hump leave no residual peak); and each nuisance term not yet in the model: a random-
 walk drift, AR(1) noise, 1/f noise, a gain drift (started along the least-squares fit of its cosines
@@ -119,6 +121,7 @@ from vibinverse.models.modal import (
     GAIN_TERMS,
     ModalModel,
     ModalSpec,
+    background,
     gain_basis,
     gain_names,
     mode_start,
@@ -156,6 +159,10 @@ KEEP_GAIN = 6.0
 #: density is above a fifth of its peak there), takes the resonance's place rather than sitting
 #: beside it: not kept for the estimate (`in_core`)
 CORE_HALF_WIDTHS = 2.0
+#: a mode is also proposed at the residual's strongest peak over its background when its strongest
+#: bin lies under this many cycles in the record, farther than PEAK_APART bins away (`mode_peaks`)
+SLOW_PEAK_CYCLES = 10.0
+PEAK_APART = 3
 #: the search's fits of a long record by Whittle's likelihood group its periodogram's ordinates
 #: (`search_bins`): at least SEARCH_GROUPS groups remain, and each resonance's half-power
 #: half-width zeta f spans at least GROUPS_PER_HALF_WIDTH groups
@@ -381,13 +388,12 @@ def candidates(
     sigma = noise_rms(values)
     if search["modes"] and spec.modes < caps[0] and band.any():
         sm = smooth(power, 7)
-        i = int(np.flatnonzero(band)[np.argmax(sm[band])])
-        f = float(freqs[i])
-        zeta, rms = mode_start(vf, vp, f, model.n_obs, floor)
         k = spec.modes
         new = [f"modes[{k}].frequency", f"modes[{k}].damping_ratio", f"modes[{k}].rms"]
-        starts = [{**values, new[0]: f, new[1]: z, new[2]: rms} for z in sorted({zeta, 0.01, 0.05})[:2]]
-        out.append(Candidate(f"mode at {f:.4g} Hz", replace(spec, modes=k + 1), starts, new))
+        for f in mode_peaks(freqs[band], sm[band], span):
+            zeta, rms = mode_start(vf, vp, f, model.n_obs, floor)
+            starts = [{**values, new[0]: f, new[1]: z, new[2]: rms} for z in sorted({zeta, 0.01, 0.05})[:2]]
+            out.append(Candidate(f"mode at {f:.4g} Hz", replace(spec, modes=k + 1), starts, new))
     if search["modes"] and 0 < spec.modes < caps[0]:
         out += split_candidates(spec, values, nyq)
     if search["lines"] and spec.lines < caps[1] and band.any():
@@ -419,6 +425,23 @@ def candidates(
         out.append(Candidate("white noise", replace(spec, white=True), grid, ["noise.sigma"]))
     if search["gain"] and not spec.gain:
         out.append(gain_candidate(model, values, spec))
+    return out
+
+
+def mode_peaks(freqs: np.ndarray, sm: np.ndarray, span: float) -> list[float]:
+    """Where a new mode is proposed: the smoothed residual spectrum's strongest bin, and when that
+    bin is slow (under SLOW_PEAK_CYCLES cycles in the record) also its strongest bin over its
+    background (`background`), when that lies farther than PEAK_APART bins from it. Why: a trend
+    the model does not yet describe puts the residual's power at its lowest bins; on an hour with a
+    quadratic drift (3.1, 7.4, 12.9 Hz modes) the only mode proposed sat there at every step (2 cycles),
+    AR(1) noise took the 7.4 and 12.9 Hz modes' power instead, and the search ended with one mode
+    of three. A resonance stands above the background where a drift's power law does not."""
+    i = int(np.argmax(sm))
+    out = [float(freqs[i])]
+    if freqs[i] * span < SLOW_PEAK_CYCLES and freqs.size > 2 * PEAK_APART:
+        j = int(np.argmax(sm / background(freqs, sm)))
+        if abs(j - i) > PEAK_APART:
+            out.append(float(freqs[j]))
     return out
 
 

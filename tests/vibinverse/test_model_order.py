@@ -14,7 +14,15 @@ from scipy.linalg import expm
 from scipy.signal import lfilter
 
 import vibinverse as vi
-from vibinverse.model_order import CORE_HALF_WIDTHS, KEEP_GAIN, choose_order, sort_labels
+from vibinverse.model_order import (
+    CORE_HALF_WIDTHS,
+    KEEP_GAIN,
+    candidates,
+    choose_order,
+    fit_fixed,
+    mode_peaks,
+    sort_labels,
+)
 from vibinverse.models.modal import ModalSpec
 
 FS = 20.0
@@ -700,3 +708,24 @@ def test_a_search_in_groups_chooses_what_the_search_on_every_ordinate_chooses(mo
     for name in ("modes[0].frequency", "modes[0].damping_ratio", "lines[0].frequency", "lines[0].amplitude"):
         assert grouped.fit.values[name] == pytest.approx(exact.fit.values[name], rel=0.02), name
     assert abs(grouped.fit.log_likelihood - exact.fit.log_likelihood) < 2.0
+
+
+def test_a_mode_is_also_proposed_above_a_trend_s_slow_excess():
+    """`mode_peaks`: where the smoothed residual spectrum's strongest bin is slow (a trend the model
+    does not describe yet), a mode is also proposed at its strongest peak over the background. On
+    an hour with a quadratic drift the only mode proposed sat at 2 cycles per record at every step,
+    AR(1) noise took two of the three resonances' power, and the search found one mode of three."""
+    span = 100.0
+    f = np.arange(1, 4001) / span
+    trend = 1e4 / np.arange(1, 4001) ** 2 + 1.0
+    hump = 30.0 * np.exp(-0.5 * ((f - 7.4) / 0.1) ** 2)
+    assert mode_peaks(f, trend + hump, span) == [f[0], pytest.approx(7.4, abs=0.02)]
+    assert mode_peaks(f, 1.0 + hump, span) == [pytest.approx(7.4, abs=0.02)]  # not slow: one place
+    # the candidates on a record whose residual is mostly the trend: a mode at the resonance too
+    t, y = simulate(4000, modes=[(7.4 / 20 * FS, 0.02, 0.5)], sigma=0.5, seed=3)
+    y = y + 40.0 * ((t - t.mean()) / np.ptp(t)) ** 2
+    series = vi.series(t, y)
+    start = fit_fixed(series, ModalSpec(0, 0, "none", "white"))
+    search = {"modes": True, "lines": False, "drift": False, "noise": False, "gain": False}
+    modes = [c.starts[0]["modes[0].frequency"] for c in candidates(start, series, search, (6, 6)) if "mode" in c.what]
+    assert modes[0] < 3.0 / np.ptp(t) and modes[1] == pytest.approx(7.4 / 20 * FS, rel=0.02)
