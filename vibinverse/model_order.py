@@ -498,12 +498,18 @@ def _gain_values(coef: np.ndarray) -> dict[str, float]:
 
 def screen(series: Series, current: OrderFit, c: Candidate) -> tuple[Candidate, float]:
     """A nuisance candidate's best starting point on its grid of starts (no optimization: one
-    likelihood each), and the gain in ln L there over the current fit. A term that gains nothing
+    likelihood each), and the gain in ln L there over the current fit, both by the same engine
+    (on a long record Whittle's; the current fit's ln L is the filter's, whose difference from
+    Whittle's depends on the model by thousands on a trended record). A term that gains nothing
     anywhere on a grid spanning its plausible range is not worth an optimization."""
     model = ModalModel({"modal": c.spec.table()}, series)
     scored = [(model.log_likelihood(sort_labels(st, c.spec)), st) for st in c.starts]
     ll, st = max(scored, key=lambda s: s[0] if math.isfinite(s[0]) else -math.inf)
-    return replace(c, starts=[st]), ll - current.log_likelihood
+    if model.spectral is None:
+        base = current.log_likelihood
+    else:
+        base = ModalModel({"modal": current.spec.table()}, series).log_likelihood(current.values)
+    return replace(c, starts=[st]), ll - base
 
 
 def renumber(values: dict[str, float], kind: str, drop: int, count: int) -> dict[str, float]:

@@ -17,10 +17,12 @@ import vibinverse as vi
 from vibinverse.model_order import (
     CORE_HALF_WIDTHS,
     KEEP_GAIN,
+    Candidate,
     candidates,
     choose_order,
     fit_fixed,
     mode_peaks,
+    screen,
     sort_labels,
 )
 from vibinverse.models.modal import ModalSpec
@@ -729,3 +731,19 @@ def test_a_mode_is_also_proposed_above_a_trend_s_slow_excess():
     search = {"modes": True, "lines": False, "drift": False, "noise": False, "gain": False}
     modes = [c.starts[0]["modes[0].frequency"] for c in candidates(start, series, search, (6, 6)) if "mode" in c.what]
     assert modes[0] < 3.0 / np.ptp(t) and modes[1] == pytest.approx(7.4 / 20 * FS, rel=0.02)
+
+
+def test_a_screen_compares_its_candidate_with_the_current_fit_by_one_engine():
+    """On a long record the candidate's grid is scored by Whittle's likelihood and the current fit's
+    ln L is the filter's: the screen's gain is taken between Whittle's values of both (a term that
+    changes nothing gains nothing), not across engines (on a trended record thousands apart)."""
+    t, y = simulate(30_000, sigma=0.7, level=3.0, seed=5, drift=0.05)
+    series = vi.series(t, y)
+    current = fit_fixed(series, ModalSpec(0, 0, "none", "white"))
+    assert current.model.spectral is not None  # Whittle's engine: the mixed comparison was possible
+    grid = [{**current.values, "ar.rms": 1e-9, "ar.time": tau} for tau in (0.1, 0.5, 2.0)]
+    c = Candidate("AR(1) noise", ModalSpec(0, 0, "none", "ar1"), grid, ["ar.rms", "ar.time"])
+    _, gain = screen(series, current, c)
+    assert abs(gain) < 1e-3
+    whittle = current.model.log_likelihood(current.values)
+    assert abs(whittle - current.log_likelihood) > 1.0  # the two engines do differ here
