@@ -107,6 +107,7 @@ that line's harmonic (`harmonic_of`, `harmonic` in the components): one source.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -202,6 +203,13 @@ class OrderFit:
     n: int
     #: the bands next to a resonance in which `settle_near_lines` found a line, (lo, hi) Hz
     windows: tuple[tuple[float, float], ...] = ()
+
+    @functools.cached_property
+    def whittle_log_likelihood(self) -> float:
+        """Whittle's ln L at the optimum on every ordinate (the fit's model may have grouped them):
+        what a nuisance candidate's screen compares its grid with on a long record (`screen`),
+        computed once for the step's candidates."""
+        return ModalModel({"modal": self.spec.table()}, self.model.series).log_likelihood(self.values)
 
     @property
     def bic(self) -> float:
@@ -505,10 +513,7 @@ def screen(series: Series, current: OrderFit, c: Candidate) -> tuple[Candidate, 
     model = ModalModel({"modal": c.spec.table()}, series)
     scored = [(model.log_likelihood(sort_labels(st, c.spec)), st) for st in c.starts]
     ll, st = max(scored, key=lambda s: s[0] if math.isfinite(s[0]) else -math.inf)
-    if model.spectral is None:
-        base = current.log_likelihood
-    else:
-        base = ModalModel({"modal": current.spec.table()}, series).log_likelihood(current.values)
+    base = current.log_likelihood if model.spectral is None else current.whittle_log_likelihood
     return replace(c, starts=[st]), ll - base
 
 
