@@ -84,7 +84,8 @@ component the user fixes (`modes`, `lines`, `drift`, `noise` or `gain` in the `m
 not searched; the white
 noise is searched only with the coloured noise (and not when `white` is given). On a record long
 enough for Whittle's engine the gain drift is not searched: only the Kalman filter runs it (minutes
-a fit at 60,000 samples); a `gain` in the table fits one.
+a fit at 60,000 samples); a `gain` in the table fits one. There a drift is screened and its rate
+set by the filter too (`drift_by_filter`): Whittle's likelihood, on the differences, hardly sees it.
 
 Why BIC: it is a consistent criterion for the order (the probability of choosing the true order
 goes to 1 as n grows, where AIC keeps a fixed chance of adding spurious components), and its
@@ -130,7 +131,7 @@ from vibinverse.models.modal import (
     spectrum,
     wrap_phase,
 )
-from vibinverse.optimize import maximize
+from vibinverse.optimize import maximize, maximize_near
 from vibinverse.priors import ParameterSpace
 from vibinverse.terms.drift import RandomWalk
 from vibinverse.terms.noise import AR1, ColouredNoise
@@ -168,6 +169,9 @@ PEAK_APART = 3
 #: (`search_bins`): at least SEARCH_GROUPS groups remain, and each resonance's half-power
 #: half-width zeta f spans at least GROUPS_PER_HALF_WIDTH groups
 SEARCH_GROUPS = 32768
+#: a drift's rate set by the filter (`drift_by_filter`) stops where one more run gains at most this
+#: in ln L by the parabola through the last three (a twentieth of the cheapest BIC price, 0.5 ln n)
+FILTER_TOL = 0.25
 GROUPS_PER_HALF_WIDTH = 10.0
 
 
@@ -286,11 +290,14 @@ def fit_order(
     maxiter: int = 300,
     ftol: float = 1e-10,
     windows: tuple[tuple[float, float], ...] = (),
+    drift_set: bool = False,
 ) -> OrderFit:
     """Maximum likelihood of `spec` inside its default priors' support, from each start (the
     parameters not in `free` held at the start's values), in the unconstrained space of the priors
     (logit; L-BFGS-B with finite-difference gradients); the modes and lines sorted by frequency.
-    `windows`: the near-line bands of the order it derives from (`OrderFit.windows`)."""
+    `windows`: the near-line bands of the order it derives from (`OrderFit.windows`). By Whittle's
+    engine a drift's rate is set by the filter (`drift_by_filter`), unless `drift_set`: the
+    start's rate is already the filter's (a refit of a move that did not touch the drift), held."""
     # the first start is the model's (`ModalModel.value`): each line's phase prior is centred on it,
     # and no spectral guess is computed for a start that names every parameter
     model = ModalModel({"modal": {**spec.table(), "start": dict(starts[0]) if starts else {}}}, series)
@@ -300,7 +307,10 @@ def fit_order(
     space = ParameterSpace(model.default_priors())
     names = space.names
     free = [n for n in names if free is None or n in free]
-    pos = [names.index(n) for n in free]
+    # Whittle's engine cannot set a drift's rate: it is held there, and the filter sets it after
+    held = set(drift_names(spec)) if model.spectral is not None else set()
+    whittle_free = [n for n in free if n not in held]
+    pos = [names.index(n) for n in whittle_free]
     best: tuple[float, dict[str, float]] | None = None
     for start in starts:
         start = {n: p.inside(_wrapped(n, start.get(n, p.centre()), p.centre())) for n, p in zip(names, space.priors)}
@@ -314,15 +324,46 @@ def fit_order(
             ftol=ftol,
             gradient=None
             if model.slope(start, []) is None
-            else lambda z: space.gradient_z(z, model.slope(space.from_z(z), free) or {}),
+            else lambda z: space.gradient_z(z, model.slope(space.from_z(z), whittle_free) or {}),
         )
         if best is None or ll > best[0]:
             best = (ll, sort_labels(space.from_z(z), spec))
     if best is None or not math.isfinite(best[0]) or best[0] <= -1e299:
         raise NumericalError(f"model order: no finite likelihood for {spec}")
     # orders are compared by the exact ln L at their optimum, whichever engine found it
-    ll = best[0] if model.spectral is None else model.exact_log_likelihood(best[1])
-    return OrderFit(spec, model, best[1], ll, len(names), model.n_obs, windows)
+    values, ll = best[1], best[0]
+    if model.spectral is not None:
+        values, ll = drift_by_filter(model, space, values, [n for n in free if n in held and not drift_set])
+    return OrderFit(spec, model, values, ll, len(names), model.n_obs, windows)
+
+
+def drift_names(spec: ModalSpec) -> list[str]:
+    """The parameters of the spec's drift (random or integrated walk), [] without one."""
+    term = DRIFT_TERMS.get(spec.drift) if spec.drifting else None
+    return term().names() if term is not None else []
+
+
+def drift_by_filter(
+    model: ModalModel, space: ParameterSpace, values: dict[str, float], free: list[str]
+) -> tuple[dict[str, float], float]:
+    """An optimum of Whittle's likelihood with its drift's rate (when in `free`) set by the Kalman
+    filter's exact ln L, the rest held, and that ln L. Why: Whittle's engine works on the
+    differences, where a walk's level path is hidden under the end-to-end jump's share of the low
+    ordinates (`Periodogram.density`: 2 v / m, as large as the walk's own increments), so it
+    cannot set the rate: on an hour at 200 Hz with a quadratic + random-walk drift the filter puts
+    3 modes and a walk of rate 0.01 32,000 in ln L above the same modes without it, where Whittle's
+    says the walk loses 300 (the search took two modes of one cycle per record for the trend). A
+    local search over the log rate from the start's, inside the prior's support
+    (`optimize.maximize_near`): 3-6 filter runs of 0.06-0.25 s at 720,000 samples."""
+    ll = model.exact_log_likelihood(values)
+    if len(free) != 1:
+        return values, ll
+    name = free[0]
+    lo, hi = (math.log(b) for b in space.priors[space.names.index(name)].bounds)
+    x0 = min(max(math.log(max(values[name], 1e-300)), lo), hi)
+    exact = lambda x: model.exact_log_likelihood({**values, name: math.exp(x)})
+    best, x = maximize_near(exact, x0, ll, (lo, hi), tol=FILTER_TOL)
+    return ({**values, name: math.exp(x)}, best) if best > ll else (values, ll)
 
 
 def groupable(model: ModalModel) -> bool:
@@ -511,9 +552,12 @@ def screen(series: Series, current: OrderFit, c: Candidate) -> tuple[Candidate, 
     Whittle's depends on the model by thousands on a trended record). A term that gains nothing
     anywhere on a grid spanning its plausible range is not worth an optimization."""
     model = ModalModel({"modal": c.spec.table()}, series)
-    scored = [(model.log_likelihood(sort_labels(st, c.spec)), st) for st in c.starts]
+    # a drift is scored by the filter on both sides (Whittle's engine cannot see it: `drift_by_filter`)
+    exact = model.spectral is None or bool(set(drift_names(c.spec)) & set(c.new))
+    score = model.exact_log_likelihood if exact else model.log_likelihood
+    scored = [(score(sort_labels(st, c.spec)), st) for st in c.starts]
     ll, st = max(scored, key=lambda s: s[0] if math.isfinite(s[0]) else -math.inf)
-    base = current.log_likelihood if model.spectral is None else current.whittle_log_likelihood
+    base = current.log_likelihood if exact else current.whittle_log_likelihood
     return replace(c, starts=[st]), ll - base
 
 
@@ -1189,7 +1233,18 @@ def partial_fit(series: Series, current: OrderFit, c: Candidate) -> OrderFit:
     whose band reaches it (`near_modes`) free, the rest held at the current optimum (a few
     iterations: a cheap lower bound on its gain)."""
     keep = [*c.new, "level", "noise.sigma", *near_modes(c, current.model.span)]
-    return fit_order(series, c.spec, c.starts, free=keep, maxiter=60, ftol=1e-9, windows=current.windows)
+    # a move of a mode or a line leaves a drift's rate where the filter set it (`drift_by_filter`)
+    same = replace(c.spec, modes=0, lines=0) == replace(current.spec, modes=0, lines=0)
+    return fit_order(
+        series,
+        c.spec,
+        c.starts,
+        free=keep,
+        maxiter=60,
+        ftol=1e-9,
+        windows=current.windows,
+        drift_set=same and current.spec.drifting,
+    )
 
 
 def _best_move(
@@ -1221,7 +1276,8 @@ def _best_move(
     refits = []
     for c, pf in partial[:REFIT_TOP]:
         if pf.bic < current.bic + slack:
-            refits.append((c, fit_order(series, c.spec, [pf.values], windows=current.windows)))
+            # the partial fit's drift rate is the filter's (`drift_by_filter`), or the current's, set so too
+            refits.append((c, fit_order(series, c.spec, [pf.values], windows=current.windows, drift_set=True)))
     best = min(refits, key=lambda cf: cf[1].bic, default=None)
     kept = best is not None and best[1].bic < current.bic
     refitted = {id(c): f for c, f in refits}

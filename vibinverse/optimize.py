@@ -87,3 +87,55 @@ def maximize(
         z[pos] = zf0 + scale * res.x
         return -float(res.fun), z
     return -start, z
+
+
+def maximize_near(
+    f: Callable[[float], float],
+    x0: float,
+    f0: float,
+    limits: tuple[float, float],
+    step: float = 0.25,
+    tol: float = 0.0,
+) -> tuple[float, float]:
+    """(max, argmax) of a smooth one-dimensional f near x0 (f(x0) = f0 given) within `limits`, for
+    an f dear to evaluate (the Kalman filter's ln L of a long record): f at x0 -+ `step`; while an
+    end is higher, the triple moves that way with its step doubled (to the limit); then one
+    parabola through the triple, its vertex evaluated unless the parabola rises there by `tol` or
+    less over the triple's best. 2-3 evaluations when x0 is within a step of the maximum; the best value seen is
+    returned (a non-finite one counts as -inf)."""
+    lo, hi = limits
+    seen: dict[float, float] = {x0: f0 if math.isfinite(f0) else -math.inf}
+
+    def ev(x: float) -> float:
+        x = min(max(x, lo), hi)
+        if x not in seen:
+            v = f(x)
+            seen[x] = v if math.isfinite(v) else -math.inf
+        return seen[x]
+
+    c, h = x0, step
+    a, b = max(c - h, lo), min(c + h, hi)
+    for _ in range(12):
+        fa, fc, fb = ev(a), ev(c), ev(b)
+        if fa > fc and a > lo:
+            c, b, h = a, c, 2.0 * h
+            a = max(c - h, lo)
+        elif fb > fc and b < hi:
+            c, a, h = b, c, 2.0 * h
+            b = min(c + h, hi)
+        else:
+            break
+    fa, fc, fb = ev(a), ev(c), ev(b)
+    den = (c - a) * (fc - fb) - (c - b) * (fc - fa)
+    if a < c < b and den != 0.0 and all(math.isfinite(v) for v in (fa, fb, fc)):
+        v = c - 0.5 * ((c - a) ** 2 * (fc - fb) - (c - b) ** 2 * (fc - fa)) / den
+        # the parabola's value there (Lagrange's form), against the triple's best
+        p = (
+            fa * (v - c) * (v - b) / ((a - c) * (a - b))
+            + fc * (v - a) * (v - b) / ((c - a) * (c - b))
+            + fb * (v - a) * (v - c) / ((b - a) * (b - c))
+        )
+        if p - max(fa, fb, fc) > tol:
+            ev(v)
+    x, v = max(seen.items(), key=lambda kv: kv[1])
+    return v, x
