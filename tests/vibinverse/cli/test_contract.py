@@ -342,9 +342,10 @@ def _check_bad_option(verb: str, option: str, argv: list[str]) -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         line = _refused(Path(tmp), argv, None)
-        if "input: file not found" in line:
+        if any(f"{field}: file not found" in line for field in ("input", "data")):
             # the command's input file does not exist either: an option whose check needs the data
-            # (a band against the Nyquist frequency) is refused after it, and naming it is right
+            # (a band against the Nyquist frequency; --modes 7-36, allowed for a multi-channel
+            # table, not for one series) is refused after it, and naming it is right
             return
         if option.startswith("--"):
             assert option in line, (option, line)
