@@ -24,6 +24,7 @@ for name, p in result.summary()["parameters"].items():  # the JSON the CLI write
     print(f"{name:<42} {p['map']:<11.5g} 90% [{p['q05']:.5g}, {p['q95']:.5g}]  truth {p['truth']:.5g}")
 for d in result.detections:  # the same as vi.detect(result)
     print(f"{d.what}: log-likelihood gain {d.delta_loglike:.1f}, threshold {d.threshold:.1f}, detected {d.detected}")
-path = result.to_netcdf(Path(tempfile.mkdtemp(prefix="vibinverse-")) / "result.nc")
-summary, idata = vi.read_result(path)  # the summary and ArviZ InferenceData
-print(f"wrote {path}; groups: {', '.join(idata.groups())}")
+with tempfile.TemporaryDirectory(prefix="vibinverse-") as tmp:  # your own path in a real run
+    path = result.to_netcdf(Path(tmp) / "result.nc")
+    summary, idata = vi.read_result(path)  # the summary and ArviZ InferenceData
+    print(f"wrote and read back {path.name}; groups: {', '.join(idata.groups())}")

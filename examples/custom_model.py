@@ -113,8 +113,9 @@ if __name__ == "__main__":
     y[100:120] = np.nan  # a gap
     series = vi.series(t, y, scene=table, source="toy")  # the scene: the summary reports the true values
 
-    chain = Path(tempfile.mkdtemp(prefix="vibinverse-")) / "chain.h5"  # emcee checkpoint; default ./vibinverse-chain.h5
-    result = vi.fit(series, table, model="damped_sine", method="auto", chain=chain, max_steps=3000)
+    with tempfile.TemporaryDirectory(prefix="vibinverse-") as tmp:  # the emcee checkpoint, removed after
+        chain = Path(tmp) / "chain.h5"  # default ./vibinverse-chain.h5
+        result = vi.fit(series, table, model="damped_sine", method="auto", chain=chain, max_steps=3000)
     summary = result.summary()
     print(f"method {summary['method']}; " + ", ".join(f"{k} {v:.2f} s" for k, v in summary["timing"].items()))
     for name, p in summary["parameters"].items():
