@@ -166,6 +166,8 @@ def build_posterior(
         priors = _priors(free, table)
         if priors is not None:  # the nuisance terms stay free beside the parameters the analyst names
             priors = {**sm.nuisance_priors(), **priors}
+        elif modal and order is not None and order.held:  # held where the filter set them (`OrderResult.held`)
+            priors = {n: p for n, p in sm.default_priors().items() if n not in order.held}
         return Posterior(sm, priors), order, modal
 
 
@@ -253,6 +255,12 @@ def fit_series(
             result.timing["model_order_s"] = order.seconds
             if order.capped:  # the record holds more modes or lines than the search may add
                 result.diagnostics["order_capped"] = order.capped
+            held = {n: v for n, v in order.held.items() if n not in post.space.names}
+            if held:  # values the fit's likelihood cannot measure: the filter's maximum, no interval
+                result.diagnostics["held"] = {
+                    n: {"value": v, "why": "set by the Kalman filter's likelihood; Whittle's cannot measure it"}
+                    for n, v in held.items()
+                }
     elif order is not None:  # a scene's nuisance terms, chosen by the data
         result.diagnostics["nuisance_search"] = order.criterion
         result.timing["nuisance_search_s"] = order.seconds

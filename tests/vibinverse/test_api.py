@@ -81,3 +81,25 @@ def test_api_functions_stay_bound_when_their_namesake_submodules_load():
         builtin_scene("roof_elastic"), vary=["sensor.offset=0.01,0.02"], overrides=["footprint.resolution=32"]
     )
     assert len(rows["rows"]) == 2 and callable(vi.design)
+
+
+@pytest.mark.slow
+def test_a_long_record_s_drift_rate_is_held_where_the_filter_set_it_not_given_whittle_s_interval():
+    """A 40 min, 10 Hz record (three modes, the robustness bench's quadratic + random-walk drift) is
+    fitted by Whittle's likelihood, which cannot measure a walk's rate: its posterior interval would
+    be a false promise. The rate is held where the order search's filter set it, named in the
+    diagnostics, and has no interval; the modes keep theirs."""
+    from vibinverse.bench.robustness_cases import Case, Mode
+    from vibinverse.bench.robustness_cases import simulate as bench_simulate
+
+    modes = (Mode(1.92, 0.012, 1.0), Mode(2.31, 0.015, 0.7), Mode(2.68, 0.02, 0.5))
+    case = Case("building", "", fs=10.0, duration=2400.0, modes=modes, lines=(), sigma=0.3, drift=3.0)
+    d = bench_simulate(case, 1)
+    summary = vi.fit(vi.series(d.time, d.intensity)).summary()
+    held = summary["diagnostics"]["held"]
+    assert list(held) == ["drift.rate"] and held["drift.rate"]["value"] > 0
+    assert "drift.rate" not in summary["parameters"]
+    assert [c["rate"] for c in summary["data"]["components"] if c["kind"] == "drift"] == [held["drift.rate"]["value"]]
+    for i, m in enumerate(modes):
+        p = summary["parameters"][f"modes[{i}].frequency"]
+        assert p["q05"] < p["q95"] and p["median"] == pytest.approx(m.frequency, rel=0.01)
