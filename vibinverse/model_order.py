@@ -169,10 +169,10 @@ PEAK_APART = 3
 #: (`search_bins`): at least SEARCH_GROUPS groups remain, and each resonance's half-power
 #: half-width zeta f spans at least GROUPS_PER_HALF_WIDTH groups
 SEARCH_GROUPS = 32768
-#: a drift's rate set by the filter (`drift_by_filter`) stops where one more run gains at most this
-#: in ln L by the parabola through the last three (a twentieth of the cheapest BIC price, 0.5 ln n)
-FILTER_TOL = 0.25
 GROUPS_PER_HALF_WIDTH = 10.0
+#: a drift's rate set by the filter (`drift_by_filter`) stops where one more run gains at most this
+#: in ln L by the parabola through the last three (under a twentieth of the cheapest price, 0.5 ln n)
+FILTER_TOL = 0.25
 
 
 def band_frequencies(band: tuple[float, float], span: float) -> float:
@@ -266,7 +266,7 @@ class OrderResult:
         one-hour record its 90 % interval, 0.061-0.067, missed the true 0.0707 (the filter's 0.069)."""
         if self.fit.model.spectral is None:
             return {}
-        return {n: float(self.fit.values[n]) for n in drift_names(self.fit.spec) if n in self.fit.values}
+        return {n: float(self.fit.values[n]) for n in self.fit.spec.drift_names if n in self.fit.values}
 
     def table(self) -> dict[str, Any]:
         """The chosen order's `modal` table: its start the optimum, with the windows of the lines
@@ -318,9 +318,9 @@ def fit_order(
     names = space.names
     free = [n for n in names if free is None or n in free]
     # Whittle's engine cannot set a drift's rate: it is held there, and the filter sets it after
-    held = set(drift_names(spec)) if model.spectral is not None else set()
-    whittle_free = [n for n in free if n not in held]
-    pos = [names.index(n) for n in whittle_free]
+    held = set(spec.drift_names) if model.spectral is not None else set()
+    optimized = [n for n in free if n not in held]
+    pos = [names.index(n) for n in optimized]
     best: tuple[float, dict[str, float]] | None = None
     for start in starts:
         start = {n: p.inside(_wrapped(n, start.get(n, p.centre()), p.centre())) for n, p in zip(names, space.priors)}
@@ -334,7 +334,7 @@ def fit_order(
             ftol=ftol,
             gradient=None
             if model.slope(start, []) is None
-            else lambda z: space.gradient_z(z, model.slope(space.from_z(z), whittle_free) or {}),
+            else lambda z: space.gradient_z(z, model.slope(space.from_z(z), optimized) or {}),
         )
         if best is None or ll > best[0]:
             best = (ll, sort_labels(space.from_z(z), spec))
@@ -345,12 +345,6 @@ def fit_order(
     if model.spectral is not None:
         values, ll = drift_by_filter(model, space, values, [n for n in free if n in held and not drift_set])
     return OrderFit(spec, model, values, ll, len(names), model.n_obs, windows)
-
-
-def drift_names(spec: ModalSpec) -> list[str]:
-    """The parameters of the spec's drift (random or integrated walk), [] without one."""
-    term = DRIFT_TERMS.get(spec.drift) if spec.drifting else None
-    return term().names() if term is not None else []
 
 
 def drift_by_filter(
@@ -563,7 +557,7 @@ def screen(series: Series, current: OrderFit, c: Candidate) -> tuple[Candidate, 
     anywhere on a grid spanning its plausible range is not worth an optimization."""
     model = ModalModel({"modal": c.spec.table()}, series)
     # a drift is scored by the filter on both sides (Whittle's engine cannot see it: `drift_by_filter`)
-    exact = model.spectral is None or bool(set(drift_names(c.spec)) & set(c.new))
+    exact = model.spectral is None or bool(set(c.spec.drift_names) & set(c.new))
     score = model.exact_log_likelihood if exact else model.log_likelihood
     scored = [(score(sort_labels(st, c.spec)), st) for st in c.starts]
     ll, st = max(scored, key=lambda s: s[0] if math.isfinite(s[0]) else -math.inf)

@@ -102,7 +102,8 @@ def maximize_near(
     end is higher, the triple moves that way with its step doubled (to the limit); then one
     parabola through the triple, its vertex evaluated unless the parabola rises there by `tol` or
     less over the triple's best. 2-3 evaluations when x0 is within a step of the maximum; the best value seen is
-    returned (a non-finite one counts as -inf)."""
+    returned (a non-finite one counts as -inf). Why not scipy's bounded or bracketed Brent: from the
+    same starts it took 9 filter runs a call on the one-hour record, this 4."""
     lo, hi = limits
     seen: dict[float, float] = {x0: f0 if math.isfinite(f0) else -math.inf}
 

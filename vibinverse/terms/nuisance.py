@@ -49,6 +49,12 @@ class NuisanceKinds:
         """Whether an additive drift is there."""
         return DRIFT_TERMS[self.drift] is not None
 
+    @property
+    def drift_names(self) -> list[str]:
+        """The additive drift's parameters ([] without one)."""
+        term = DRIFT_TERMS[self.drift]
+        return term().names() if term is not None else []
+
 
 @dataclass(frozen=True)
 class NuisanceSpec(NuisanceKinds):
