@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from vibinverse import inference_data
+from vibinverse.detection import BROAD_DAMPING
 from vibinverse.io import jsonio
 from vibinverse.io.atomic import write_all
 from vibinverse.result import detections, read_result
@@ -295,7 +296,13 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
             "(a slow sway, a drift or a mode are hard to tell apart over so few cycles); a longer record decides."
         )
     for det in detections(d):
-        if not det.detected:
+        if det.broad:
+            out.append(
+                f"The {det.what} is a broad hump (damping ratio above {BROAD_DAMPING:g}, quality factor under "
+                f"{1 / (2 * BROAD_DAMPING):g}): it is part of the fit, but a slow background or the noise's shape makes such "
+                "a hump as readily as a structure does, so it is not claimed as a resonance."
+            )
+        elif not det.detected:
             out.append(
                 f"No {det.what} is detected: the fit with it is at most {format_number(det.delta_loglike, '.1f')} in "
                 f"log-likelihood above the best fit without it (the threshold is {format_number(det.threshold, '.1f')}: 5 sigma, plus the "
@@ -739,6 +746,12 @@ def _verdict_html(v: Verdict, summary: dict) -> str:
             items.append(
                 f'<li class="det"><span class="mark">✔</span><b>{_text(ln.label)}</b> detected'
                 f"{' ' + value + _text(unc) if where else ''}. {fap}</li>"
+            )
+        elif ln.broad:
+            at = f" {value}" if where else ""
+            items.append(
+                f'<li class="nodet"><span class="mark">✘</span><b>{_text(ln.label)}</b>{at}: a broad hump, '
+                f"not claimed as a resonance (damping ratio above {BROAD_DAMPING:g}). {fap}</li>"
             )
         else:
             at = f" (best fit {value})" if where else ""

@@ -29,12 +29,14 @@ WEIGHTED_APPROXIMATIONS = ("importance",)
 @dataclass(frozen=True)
 class Detection:
     """One line's detection test: the log-likelihood gain of the fit with it over the fit without
-    it, against the threshold it must pass (`vibinverse.detection`)."""
+    it, against the threshold it must pass (`vibinverse.detection`); `broad`: a resonance too
+    damped to be claimed as one (`vibinverse.detection.BROAD_DAMPING`)."""
 
     what: str
     delta_loglike: float
     threshold: float
     detected: bool
+    broad: bool = False
 
 
 @dataclass
@@ -270,6 +272,7 @@ def detections(diagnostics: dict[str, Any]) -> list[Detection]:
                     diagnostics.get(f"{what}_delta_loglike", math.nan),
                     diagnostics.get(f"{what}_threshold", DETECTION_GAIN),
                     bool(detected),
+                    diagnostics.get(f"{what}_broad") is True,
                 )
             )
     return out

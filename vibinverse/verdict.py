@@ -116,6 +116,7 @@ class VerdictLine:
     uncertainty_kind: str = ""  # "sd" or "half the 90 % interval"
     units: str = "Hz"
     second_order: bool = False  # the scene sees the line only at second order: the data show it at 2f
+    broad: bool = False  # a resonance too damped to be one (`vibinverse.detection.BROAD_DAMPING`)
 
     def where(self, plus_minus: str = "+-") -> str:
         """ "at 3.466 +- 0.004 Hz", or "" when the frequency is not fitted."""
@@ -126,7 +127,11 @@ class VerdictLine:
     def text(self, plus_minus: str = "+-") -> str:
         """ "tilt resonance detected at 3.466 +- 0.004 Hz", "drive line not detected (false-alarm
         probability 0.68)"; a line seen only at second order says that its spectral line is at 2f
-        (the fit reports f, the frequency of the motion)."""
+        (the fit reports f, the frequency of the motion); a broad hump says so ("mode 2 at 4.47 +-
+        0.08 Hz: a broad hump, not claimed as a resonance")."""
+        if self.broad:
+            where = self.where(plus_minus)
+            return f"{self.label} {where}: a broad hump, not claimed as a resonance".replace("  ", " ")
         if self.detected:
             where = self.where(plus_minus)
             text = f"{self.label} detected {where}".rstrip() if where else f"{self.label} detected"
@@ -180,6 +185,7 @@ def _line(what: str, diagnostics: dict, parameters: dict, second_order: Sequence
         what=what,
         label=label,
         detected=diagnostics.get(f"{what}_detected") is True,
+        broad=diagnostics.get(f"{what}_broad") is True,
         delta_loglike=as_number(diagnostics.get(f"{what}_delta_loglike")),
         threshold=as_number(diagnostics.get(f"{what}_threshold")),
         false_alarm_probability=as_number(diagnostics.get(f"{what}_false_alarm_probability")),

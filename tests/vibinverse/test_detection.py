@@ -232,3 +232,41 @@ def test_a_strong_line_is_decided_by_the_refit_near_it():
     # the whole refit from the near one (kept in `null_optima`): the far modes take back nothing
     whole = ll - null_optimum(posterior, values, test)
     assert whole == pytest.approx(d["line_0_delta_loglike"], abs=0.5)
+
+
+# ------------------------------------------------------------------ a resonance must be one
+def test_a_broad_hump_is_part_of_the_fit_but_not_claimed_as_a_resonance():
+    """A strong hump of damping ratio 0.4 (a slow background's shape) beside a sharp mode: both are
+    fitted, both gain far above the threshold, only the sharp one is claimed; the broad one is
+    named as such in the diagnostics, the verdict and the result's detections."""
+    from vibinverse.bench.robustness_cases import Case, Mode
+    from vibinverse.bench.robustness_cases import simulate as bench_simulate
+    from vibinverse.detection import BROAD_DAMPING
+    from vibinverse.result import detections
+    from vibinverse.verdict import verdict
+
+    case = Case("hump", "", fs=20.0, duration=300.0, modes=(Mode(1.0, 0.4, 1.0), Mode(3.0, 0.01, 0.5)), lines=())
+    d = bench_simulate(case, 0)
+    _, summary = fitted({"modal": {"modes": 2, "lines": 0}}, Series(d.time, d.intensity, "hump"))
+    diag, params = summary["diagnostics"], summary["parameters"]
+    zeta = {i: params[f"modes[{i}].damping_ratio"]["map"] for i in (0, 1)}
+    broad = max(zeta, key=zeta.get)
+    sharp = 1 - broad
+    assert zeta[broad] > BROAD_DAMPING > 0.05 > zeta[sharp]
+    for i in (0, 1):
+        assert diag[f"mode_{i}_delta_loglike"] > 10 * diag[f"mode_{i}_threshold"]
+    assert diag[f"mode_{broad}_broad"] and not diag[f"mode_{broad}_detected"]
+    assert not diag[f"mode_{sharp}_broad"] and diag[f"mode_{sharp}_detected"]
+    assert [x.broad for x in detections(diag) if x.what.startswith("mode")] == [i == broad for i in (0, 1)]
+    text = verdict(summary).headline
+    assert f"mode {broad} at " in text and "a broad hump, not claimed as a resonance" in text
+    assert f"mode {sharp} detected at 3.0" in text
+
+
+def test_only_a_resonance_s_test_asks_whether_it_is_broad():
+    """A line has no damping ratio: no `_broad` key, claimed on its gain alone (as before)."""
+    post, _ = _noise_posterior(3)
+    t = post.series.time
+    post.model.series = post.series = Series(t, post.series.intensity + 2.0 * np.cos(2 * np.pi * 20.0 * t), "line")
+    d = line_detection(post, post.model.fit(5.0, 45.0))
+    assert "line_broad" not in d and d["line_detected"]

@@ -571,3 +571,15 @@ def test_the_gain_map_of_a_row_of_pixels_fills_its_panel(rows, cols):
     rgb = np.asarray(Image.open(io.BytesIO(base64.b64decode(png.split(",", 1)[1]))).convert("RGB"), dtype=float)
     saturated = (np.abs(rgb[..., 0] - rgb[..., 2]) > 60).mean()  # red or blue, not grey or white
     assert title == "Pixels" and saturated > 0.25, saturated
+
+
+def test_a_broad_hump_is_explained_not_reported_as_undetected():
+    """A mode too damped to be a resonance (`mode_0_broad`) gets the broad hump's warning, not the
+    "No ... is detected" one its `_detected` False would give otherwise."""
+    from vibinverse.report import warnings_for
+
+    d = {"mode_0_detected": False, "mode_0_broad": True, "mode_0_delta_loglike": 900.0, "mode_0_threshold": 20.0}
+    out = warnings_for({"diagnostics": d, "parameters": {}}, None, [])
+    assert len(out) == 1 and "mode 0 is a broad hump (damping ratio above 0.2" in out[0]
+    d["mode_0_broad"] = False
+    assert warnings_for({"diagnostics": d, "parameters": {}}, None, [])[0].startswith("No mode 0 is detected")

@@ -21,6 +21,7 @@ from forward.reduce import DEFAULT_RTOL, compile_scene
 from vibinverse import __version__, api
 from vibinverse.cli import ranges
 from vibinverse.cli.outputs import created, output_dir, output_option
+from vibinverse.detection import BROAD_DAMPING
 from vibinverse.errors import InputError, scene_errors
 from vibinverse.io import jsonio
 from vibinverse.io.atomic import check_paths, write_all
@@ -337,7 +338,9 @@ def cmd_fit(args: argparse.Namespace) -> dict[str, Any]:
         truth = "" if v["truth"] is None else f"  truth {v['truth']:.6g}"
         logger.info(f"  {name:<44} {v['median']:.6g}{interval}{truth}")
     for d in result.detections:
-        if not d.detected:
+        if d.broad:
+            logger.info(f"  {d.what} is a broad hump (damping ratio > {BROAD_DAMPING:g}): not claimed as a resonance")
+        elif not d.detected:
             logger.info(f"  no {d.what} detected (log-likelihood gain {d.delta_loglike:.1f} < {d.threshold:.1f})")
     for note in prior_warnings(summary):
         logger.warning(note)

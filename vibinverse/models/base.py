@@ -33,13 +33,16 @@ class LineTest:
     name of its frequency when that is free (the look-elsewhere effect), else None; `deterministic`
     marks a line of fixed amplitude (`vibinverse.stationarity` checks it); `near` the parameters
     that can take back its power when it is removed (the components whose band reaches it and the
-    broadband terms: `vibinverse.detection.null_optimum` refits these first), None for all."""
+    broadband terms: `vibinverse.detection.null_optimum` refits these first), None for all;
+    `damping` a resonance's damping ratio at the tested point (a hump too broad is not claimed as
+    one: `vibinverse.detection.BROAD_DAMPING`), None for a line."""
 
     label: str
     null: dict[str, float]
     frequency: str | None
     deterministic: bool = False  # a line of fixed amplitude (not a noise-driven resonance): its stationarity is checked
     near: tuple[str, ...] | None = None
+    damping: float | None = None
 
 
 class SignalModel(ABC):

@@ -1234,7 +1234,10 @@ class ModalModel(SignalModel):
         for i in range(self.spec.modes):
             f = f"modes[{i}].frequency"
             near = self.near_parameters(values, f"modes[{i}]")
-            out.append(LineTest(f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None, near=near))
+            damping = self.value(values, f"modes[{i}].damping_ratio")
+            out.append(
+                LineTest(f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None, near=near, damping=damping)
+            )
         return out
 
     def near_parameters(self, values: dict[str, float], component: str) -> tuple[str, ...]:

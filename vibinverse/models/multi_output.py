@@ -137,11 +137,21 @@ class Source:
         return {**dict.fromkeys(SOURCE_BASES, 0), cls.base: 1}
 
     @classmethod
-    def line_test(cls, i: int, free: list[str]) -> LineTest:
-        """The test of the i-th source of this kind: its `null` parameter to 0."""
+    def damping_name(cls, i: int) -> str | None:
+        """The i-th source's damping ratio, None for a kind without one (a line)."""
+        return f"{cls.base}[{i}].damping_ratio" if "damping_ratio" in cls.fields else None
+
+    @classmethod
+    def line_test(cls, i: int, free: list[str], damping: float | None = None) -> LineTest:
+        """The test of the i-th source of this kind: its `null` parameter to 0 (`damping`: a
+        resonance's damping ratio at the tested point)."""
         f = f"{cls.base}[{i}].frequency"
         return LineTest(
-            f"{cls.kind}_{i}", {f"{cls.base}[{i}].{cls.null}": 0.0}, f if f in free else None, cls.deterministic
+            f"{cls.kind}_{i}",
+            {f"{cls.base}[{i}].{cls.null}": 0.0},
+            f if f in free else None,
+            cls.deterministic,
+            damping=damping,
         )
 
 
@@ -434,8 +444,12 @@ class MultiOutputModel(SignalModel):
         return [{**self._spectral_guess(), **self._start}]
 
     def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
-        """Each line (its amplitude to 0) and each mode (its rms to 0): `Source.line_test`."""
-        return [src.line_test(i, free) for src, i in zip(self.sources, self.index)]
+        """Each line (its amplitude to 0) and each mode (its rms to 0, with its damping ratio):
+        `Source.line_test`."""
+        return [
+            src.line_test(i, free, self.value(values, n) if (n := src.damping_name(i)) else None)
+            for src, i in zip(self.sources, self.index)
+        ]
 
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
         """The observed information -d^2 log L / d theta^2 at `values` by central differences of

@@ -369,6 +369,7 @@ def test_registry_table_and_priors():
     tests = m.line_tests(VALUES, list(priors))
     assert [t.label for t in tests] == ["line_0", "mode_0", "mode_1"]
     assert tests[0].null == {"lines[0].amplitude": 0.0} and tests[1].null == {"modes[0].rms": 0.0}
+    assert [t.damping for t in tests] == [None, VALUES["modes[0].damping_ratio"], VALUES["modes[1].damping_ratio"]]
     # near the 2.1 Hz line (20 bins of 1 / 150 s plus 5 half-widths): neither the 1.3 nor the 3.7 Hz
     # mode; the broadband terms always; a broad mode (zeta 0.5 at 3.7 Hz) reaches it
     assert not any(n.startswith("modes[") for n in tests[0].near)

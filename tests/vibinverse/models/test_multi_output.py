@@ -152,6 +152,8 @@ def test_names_priors_starts_units_and_line_tests():
     assert m.units("modes[0].damping_ratio")[0] == "1"
     tests = {lt.label: lt for lt in m.line_tests(VALUES, list(priors))}
     assert set(tests) == {"mode_0", "mode_1", "line_0"} and tests["line_0"].null == {"lines[0].amplitude": 0.0}
+    # a mode's test carries its damping ratio (a broad hump is not claimed), a line's none
+    assert (tests["mode_0"].damping, tests["mode_1"].damping, tests["line_0"].damping) == (0.05, 0.1, None)
     assert m.log_likelihood({**VALUES, "modes[0].rms": 0.0}) < m.log_likelihood(VALUES) - 100
     assert m.log_likelihood({**VALUES, "modes[0].damping_ratio": -0.1}) == -math.inf
     comps = m.components(VALUES)
