@@ -296,7 +296,13 @@ def warnings_for(summary: dict, draws: np.ndarray | None, names: list[str]) -> l
             "(a slow sway, a drift or a mode are hard to tell apart over so few cycles); a longer record decides."
         )
     for det in detections(d):
-        if det.broad:
+        if det.product:
+            out.append(
+                f"The {det.what} lies within a Fourier bin of {det.product}, a combination of stronger tones: a harmonic "
+                "or intermodulation product (a nonlinearity of the drive, the sensor or the optics makes them), "
+                "kept in the fit and not claimed as a vibration of its own."
+            )
+        elif det.broad:
             out.append(
                 f"The {det.what} is a broad hump (damping ratio above {BROAD_DAMPING:g}, quality factor under "
                 f"{1 / (2 * BROAD_DAMPING):g}): it is part of the fit, but a slow background or the noise's shape makes such "
@@ -746,6 +752,12 @@ def _verdict_html(v: Verdict, summary: dict) -> str:
             items.append(
                 f'<li class="det"><span class="mark">✔</span><b>{_text(ln.label)}</b> detected'
                 f"{' ' + value + _text(unc) if where else ''}. {fap}</li>"
+            )
+        elif ln.product:
+            at = f" {value}" if where else ""
+            items.append(
+                f'<li class="nodet"><span class="mark">✘</span><b>{_text(ln.label)}</b>{at}: {_text(ln.product)}, '
+                f"a product of stronger tones, not claimed. {fap}</li>"
             )
         elif ln.broad:
             at = f" {value}" if where else ""

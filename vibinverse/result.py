@@ -30,13 +30,16 @@ WEIGHTED_APPROXIMATIONS = ("importance",)
 class Detection:
     """One line's detection test: the log-likelihood gain of the fit with it over the fit without
     it, against the threshold it must pass (`vibinverse.detection`); `broad`: a resonance too
-    damped to be claimed as one (`vibinverse.detection.BROAD_DAMPING`)."""
+    damped to be claimed as one (`vibinverse.detection.BROAD_DAMPING`); `product`: the combination
+    of stronger tones it is a harmonic or intermodulation product of ("" for none,
+    `vibinverse.detection.products`)."""
 
     what: str
     delta_loglike: float
     threshold: float
     detected: bool
     broad: bool = False
+    product: str = ""
 
 
 @dataclass
@@ -273,6 +276,7 @@ def detections(diagnostics: dict[str, Any]) -> list[Detection]:
                     diagnostics.get(f"{what}_threshold", DETECTION_GAIN),
                     bool(detected),
                     diagnostics.get(f"{what}_broad") is True,
+                    str(diagnostics.get(f"{what}_product") or ""),
                 )
             )
     return out

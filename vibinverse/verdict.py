@@ -117,6 +117,7 @@ class VerdictLine:
     units: str = "Hz"
     second_order: bool = False  # the scene sees the line only at second order: the data show it at 2f
     broad: bool = False  # a resonance too damped to be one (`vibinverse.detection.BROAD_DAMPING`)
+    product: str = ""  # the stronger tones it is a product of (`vibinverse.detection.products`)
 
     def where(self, plus_minus: str = "+-") -> str:
         """ "at 3.466 +- 0.004 Hz", or "" when the frequency is not fitted."""
@@ -128,7 +129,11 @@ class VerdictLine:
         """ "tilt resonance detected at 3.466 +- 0.004 Hz", "drive line not detected (false-alarm
         probability 0.68)"; a line seen only at second order says that its spectral line is at 2f
         (the fit reports f, the frequency of the motion); a broad hump says so ("mode 2 at 4.47 +-
-        0.08 Hz: a broad hump, not claimed as a resonance")."""
+        0.08 Hz: a broad hump, not claimed as a resonance"), and a product of stronger tones ("line 3
+        at 319.9998 +- 0.0002 Hz: 120 + 2 x 100.001 Hz, a product of stronger tones, not claimed")."""
+        if self.product:
+            where = self.where(plus_minus)
+            return f"{self.label} {where}: {self.product}, a product of stronger tones, not claimed".replace("  ", " ")
         if self.broad:
             where = self.where(plus_minus)
             return f"{self.label} {where}: a broad hump, not claimed as a resonance".replace("  ", " ")
@@ -186,6 +191,7 @@ def _line(what: str, diagnostics: dict, parameters: dict, second_order: Sequence
         label=label,
         detected=diagnostics.get(f"{what}_detected") is True,
         broad=diagnostics.get(f"{what}_broad") is True,
+        product=str(diagnostics.get(f"{what}_product") or ""),
         delta_loglike=as_number(diagnostics.get(f"{what}_delta_loglike")),
         threshold=as_number(diagnostics.get(f"{what}_threshold")),
         false_alarm_probability=as_number(diagnostics.get(f"{what}_false_alarm_probability")),

@@ -1,5 +1,6 @@
 """Detection, not invention: a weak or absent line is not reported as detected."""
 
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -270,3 +271,79 @@ def test_only_a_resonance_s_test_asks_whether_it_is_broad():
     post.model.series = post.series = Series(t, post.series.intensity + 2.0 * np.cos(2 * np.pi * 20.0 * t), "line")
     d = line_detection(post, post.model.fit(5.0, 45.0))
     assert "line_broad" not in d and d["line_detected"]
+
+
+# ------------------------------------------------------------------ a tone must be its own
+# the beam's shaker record (realdata-dev beam_shaker_tones, set 1: 19.7 s at 3200 Hz): the fit's
+# tones, (label, frequency, damping ratio or None for a line, gain)
+BEAM = [
+    ("mode_0", 149.99477, 1.9e-4, 522904),
+    ("line_0", 100.00128, None, 137383),
+    ("line_1", 120.00012, None, 184898),
+    ("line_2", 300.00231, None, 17862),
+    ("line_3", 319.99982, None, 5668),
+    ("mode_1", 279.99443, 1.2e-4, 2686),
+    ("mode_2", 419.99918, 1.0e-4, 3766),
+    ("mode_3", 439.99293, 1.1e-4, 1826),
+    ("mode_4", 549.03, 0.05, 900000),  # a broad resonance: not a tone, neither base nor product
+    ("line_4", 619.9979, None, 3939),
+    ("line_5", 639.99822, None, 2174),
+]
+
+
+def _tones(rows):
+    tests = [LineTest(label, {}, None, damping=zeta, hz=f) for label, f, zeta, _ in rows]
+    return tests, {label: float(g) for label, _, _, g in rows}
+
+
+def test_the_shaker_s_intermodulation_products_are_named_and_the_drive_tones_are_not():
+    from vibinverse.detection import combination_text, combinations, products
+
+    tests, gains = _tones(BEAM)
+    out = products(tests, gains, 19.7, 1600.0)
+    assert set(out) == {"line_2", "line_3", "line_4", "line_5", "mode_1", "mode_2", "mode_3"}
+    assert out["line_3"] == "120 + 2 x 100.001 Hz" and out["line_2"] == "2 x 149.995 Hz"
+    assert out["mode_1"] == "2 x 149.995 + 100.001 - 120 Hz"
+    # every combination of order 2-5 of three tones, positive, each at its lowest order
+    combos = combinations([150.0, 120.0, 100.0], 5)
+    assert combos[300.0] == (2, 0, 0) and combos[30.0] == (1, -1, 0) and min(combos) == 10.0
+    assert combination_text((1, -2, 0), [150.0, 100.0]) == "150 - 2 x 100 Hz"
+    # a record ten times shorter: its bins ten times wider, the tones' combinations cover 16 % of
+    # the band and a match is no evidence; nothing is read as a product
+    assert products(tests, gains, 1.97, 1600.0) == {}
+
+
+def test_a_random_tone_is_read_as_a_product_no_more_often_than_promised():
+    """Three strong tones and a weaker one, all at random frequencies in (0, 1600) Hz on a 19.7 s
+    record: the weaker one is called a product at most PRODUCT_CHANCE of the time, with its
+    binomial tolerance (0.3 % here, the guard's own chance on average)."""
+    from vibinverse.detection import PRODUCT_CHANCE, products
+
+    rng = np.random.default_rng(7)
+    n, called = 2000, 0
+    for _ in range(n):
+        f = rng.uniform(1.0, 1600.0, 4)
+        tests, gains = _tones([(f"line_{i}", f[i], None, 10.0 - i) for i in range(4)])
+        called += "line_3" in products(tests, gains, 19.7, 1600.0)
+    assert 0 < called / n <= PRODUCT_CHANCE + 3 * np.sqrt(PRODUCT_CHANCE * (1 - PRODUCT_CHANCE) / n)
+    assert called / n < 0.02
+
+
+def test_a_weak_intermodulation_line_is_fitted_named_and_not_claimed():
+    """Two lines at 7 and 11.3 Hz and a weak one at 2 x 7 + 11.3 = 25.3 Hz in white noise, fitted
+    with three lines: all three pass the detection threshold, the third is named a product."""
+    from vibinverse.bench.robustness_cases import Case, Line
+    from vibinverse.bench.robustness_cases import simulate as bench_simulate
+    from vibinverse.verdict import verdict
+
+    lines = (Line(7.0, 1.0), Line(11.3, 0.8), Line(25.3, 0.3))
+    case = Case("intermod", "", fs=100.0, duration=60.0, modes=(), lines=lines, sigma=1.0)
+    d = bench_simulate(case, 2)
+    _, summary = fitted({"modal": {"modes": 0, "lines": 3}}, Series(d.time, d.intensity, "intermod"))
+    diag, params = summary["diagnostics"], summary["parameters"]
+    third = next(j for j in range(3) if abs(params[f"lines[{j}].frequency"]["map"] - 25.3) < 0.05)
+    for j in range(3):
+        assert diag[f"line_{j}_delta_loglike"] > diag[f"line_{j}_threshold"]
+        assert diag[f"line_{j}_detected"] == (j != third)
+    assert re.fullmatch(r"2 x 7\.?\d* \+ 11\.3\d* Hz", diag[f"line_{third}_product"])
+    assert "a product of stronger tones, not claimed" in verdict(summary).headline

@@ -583,3 +583,11 @@ def test_a_broad_hump_is_explained_not_reported_as_undetected():
     assert len(out) == 1 and "mode 0 is a broad hump (damping ratio above 0.2" in out[0]
     d["mode_0_broad"] = False
     assert warnings_for({"diagnostics": d, "parameters": {}}, None, [])[0].startswith("No mode 0 is detected")
+
+
+def test_a_product_of_stronger_tones_is_explained():
+    from vibinverse.report import warnings_for
+
+    d = {"line_3_detected": False, "line_3_product": "120 + 2 x 100 Hz", "line_3_delta_loglike": 5668.0}
+    out = warnings_for({"diagnostics": d, "parameters": {}}, None, [])
+    assert len(out) == 1 and "line 3 lies within a Fourier bin of 120 + 2 x 100 Hz" in out[0]

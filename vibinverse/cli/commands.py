@@ -338,7 +338,11 @@ def cmd_fit(args: argparse.Namespace) -> dict[str, Any]:
         truth = "" if v["truth"] is None else f"  truth {v['truth']:.6g}"
         logger.info(f"  {name:<44} {v['median']:.6g}{interval}{truth}")
     for d in result.detections:
-        if d.broad:
+        if d.product:
+            logger.info(
+                f"  {d.what} is a product of stronger tones ({d.product}): not claimed as a vibration of its own"
+            )
+        elif d.broad:
             logger.info(f"  {d.what} is a broad hump (damping ratio > {BROAD_DAMPING:g}): not claimed as a resonance")
         elif not d.detected:
             logger.info(f"  no {d.what} detected (log-likelihood gain {d.delta_loglike:.1f} < {d.threshold:.1f})")

@@ -35,7 +35,9 @@ class LineTest:
     that can take back its power when it is removed (the components whose band reaches it and the
     broadband terms: `vibinverse.detection.null_optimum` refits these first), None for all;
     `damping` a resonance's damping ratio at the tested point (a hump too broad is not claimed as
-    one: `vibinverse.detection.BROAD_DAMPING`), None for a line."""
+    one: `vibinverse.detection.BROAD_DAMPING`), None for a line; `hz` the component's frequency
+    there, when the model knows it (a tone at an integer combination of stronger ones is their
+    product, not claimed: `vibinverse.detection.products`)."""
 
     label: str
     null: dict[str, float]
@@ -43,6 +45,7 @@ class LineTest:
     deterministic: bool = False  # a line of fixed amplitude (not a noise-driven resonance): its stationarity is checked
     near: tuple[str, ...] | None = None
     damping: float | None = None
+    hz: float | None = None
 
 
 class SignalModel(ABC):

@@ -1230,13 +1230,18 @@ class ModalModel(SignalModel):
         for j in range(self.spec.lines):
             f = f"lines[{j}].frequency"
             near = self.near_parameters(values, f"lines[{j}]")
-            out.append(LineTest(f"line_{j}", {f"lines[{j}].amplitude": 0.0}, f if f in free else None, True, near))
+            hz = self.value(values, f)
+            out.append(
+                LineTest(f"line_{j}", {f"lines[{j}].amplitude": 0.0}, f if f in free else None, True, near, hz=hz)
+            )
         for i in range(self.spec.modes):
             f = f"modes[{i}].frequency"
             near = self.near_parameters(values, f"modes[{i}]")
-            damping = self.value(values, f"modes[{i}].damping_ratio")
+            damping, hz = self.value(values, f"modes[{i}].damping_ratio"), self.value(values, f)
             out.append(
-                LineTest(f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None, near=near, damping=damping)
+                LineTest(
+                    f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None, near=near, damping=damping, hz=hz
+                )
             )
         return out
 

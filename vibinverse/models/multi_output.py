@@ -142,9 +142,9 @@ class Source:
         return f"{cls.base}[{i}].damping_ratio" if "damping_ratio" in cls.fields else None
 
     @classmethod
-    def line_test(cls, i: int, free: list[str], damping: float | None = None) -> LineTest:
+    def line_test(cls, i: int, free: list[str], damping: float | None = None, hz: float | None = None) -> LineTest:
         """The test of the i-th source of this kind: its `null` parameter to 0 (`damping`: a
-        resonance's damping ratio at the tested point)."""
+        resonance's damping ratio at the tested point, `hz` its frequency there)."""
         f = f"{cls.base}[{i}].frequency"
         return LineTest(
             f"{cls.kind}_{i}",
@@ -152,6 +152,7 @@ class Source:
             f if f in free else None,
             cls.deterministic,
             damping=damping,
+            hz=hz,
         )
 
 
@@ -447,7 +448,12 @@ class MultiOutputModel(SignalModel):
         """Each line (its amplitude to 0) and each mode (its rms to 0, with its damping ratio):
         `Source.line_test`."""
         return [
-            src.line_test(i, free, self.value(values, n) if (n := src.damping_name(i)) else None)
+            src.line_test(
+                i,
+                free,
+                self.value(values, n) if (n := src.damping_name(i)) else None,
+                self.value(values, f"{src.base}[{i}].frequency"),
+            )
             for src, i in zip(self.sources, self.index)
         ]
 
