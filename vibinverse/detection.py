@@ -67,25 +67,29 @@ A tone must also be its own (`products`): a line, or a resonance as narrow as on
 bandwidth 2 zeta f under TONE_BINS Fourier bins), whose frequency is within one Fourier bin (1/T) of
 an integer combination sum k_i f_i (sum |k_i| from 2 to PRODUCT_ORDER = 5) of stronger detected
 tones (larger gain) is their harmonic or intermodulation product, which a nonlinearity anywhere in
-the chain (a shaker, a sensor, the pixel's own intensity law) makes: it stays in the model, is
-named (`{label}_product`, e.g. "2 x 100 + 120 Hz") and is not claimed. Only where a frequency
-drawn at random would match one of the combinations with a chance of at most PRODUCT_CHANCE (5 %:
-their number times 2/T over the Nyquist band) is the match taken as evidence; with many strong
-tones on a short record the combinations cover the band, and nothing is read as a product. On the
-beam's shaker record (drive tones 100, 120, 150 Hz, 19.7 s at 3200 Hz) the fit's tones at 280,
-300, 320, 420, 440, 620 and 640 Hz are such products (100 + 2 x 150 - 120, 2 x 150, 2 x 100 + 120,
-...); each was claimed as a vibration before (the chance of a match there: 0.7 %, 112
-combinations). Of 2,000 records of three tones and a weaker fourth at random frequencies (the
-same span and band), the fourth was called a product in 0.3 %, the guard's own chance on average
-(tests/vibinverse/test_detection.py). Their frequencies
-match the combination of the fitted drive frequencies to within 3-13 mHz (0.1-0.25 bins), not to
-within their own intervals (a drive through a shaker is not a steady sinusoid): the bin, not the
-interval, is the tolerance.
+the chain (a shaker, a sensor, the pixel's own intensity law) makes. An intermodulation product
+(two or more distinct tones combined) stays in the model, is named (`{label}_product`, e.g.
+"2 x 100 + 120 Hz") and is not claimed. A harmonic (k x f of one tone) is named
+(`{label}_harmonic`) but still claimed: a string's or a beam's higher modes sit at near-integer
+multiples of the first, within a bin on a short record, and the data cannot tell them from a
+distortion of the first. Only where a frequency drawn at random would match one of the
+combinations with a chance of at most PRODUCT_CHANCE (5 %: their number times 2/T over the Nyquist
+band) is the match taken as evidence; with many strong tones on a short record the combinations
+cover the band, and nothing is read as a product. On the beam's shaker record (drive tones 100,
+120, 150 Hz, 19.7 s at 3200 Hz) the fit's tones at 280, 320, 420, 440, 620 and 640 Hz are
+intermodulation products (100 + 2 x 150 - 120, 2 x 100 + 120, ...), each claimed as a vibration
+before, and 300 Hz is 2 x 150 (the chance of a match there: 0.7 %, 112 combinations). Of 2,000
+records of three tones and a weaker fourth at random frequencies (the same span and band), the
+fourth matched a combination in 0.3 %, the guard's own chance on average
+(tests/vibinverse/test_detection.py). The products' frequencies match the combination of the
+fitted drive frequencies to within 3-13 mHz (0.1-0.25 bins), not to within their own intervals (a
+drive through a shaker is not a steady sinusoid): the bin, not the interval, is the tolerance.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -228,9 +232,12 @@ def line_detection(posterior: Posterior, values: dict[str, float]) -> dict[str, 
     series = posterior.series
     span = float(series.time[-1] - series.time[0]) + series.dt
     detected = [t for t in tests if out[f"{t.label}_detected"]]
-    for label, text in products(detected, gains, span, 0.5 / series.dt).items():
-        out[f"{label}_product"] = text
-        out[f"{label}_detected"] = False
+    for label, product in products(detected, gains, span, 0.5 / series.dt).items():
+        if product.mixed:
+            out[f"{label}_product"] = product.text
+            out[f"{label}_detected"] = False
+        else:
+            out[f"{label}_harmonic"] = product.text
     posterior.line_tests[key] = dict(out)
     return out
 
@@ -262,8 +269,17 @@ def tone(test: LineTest, span: float) -> bool:
     return test.damping is None or 2.0 * test.damping * test.hz * span < TONE_BINS
 
 
-def products(tests: list[LineTest], gains: dict[str, float], span: float, nyquist: float) -> dict[str, str]:
-    """{label: "2 x 100 + 120 Hz"} of each tone among `tests` (the detected ones) that lies within
+@dataclass(frozen=True)
+class Product:
+    """A tone's combination of stronger tones: "2 x 100 + 120 Hz", and whether it mixes two or more
+    of them (an intermodulation product) or is k x f of one (a harmonic)."""
+
+    text: str
+    mixed: bool
+
+
+def products(tests: list[LineTest], gains: dict[str, float], span: float, nyquist: float) -> dict[str, Product]:
+    """{label: Product} of each tone among `tests` (the detected ones) that lies within
     1/span of a combination (`combinations`) of the stronger tones that are not products
     themselves, taken strongest first by `gains`, where a random frequency in (0, nyquist) would
     match one of those combinations with a chance of at most PRODUCT_CHANCE (module docstring)."""
@@ -277,7 +293,7 @@ def products(tests: list[LineTest], gains: dict[str, float], span: float, nyquis
         near = [(sum(abs(k) for k in ks), abs(f - hz), ks) for f, ks in combos.items() if abs(f - hz) <= tol]
         if near and len(combos) * 2.0 * tol / nyquist <= PRODUCT_CHANCE:
             _, _, ks = min(near)
-            out[test.label] = combination_text(ks, freqs)
+            out[test.label] = Product(combination_text(ks, freqs), sum(k != 0 for k in ks) > 1)
         else:
             bases.append(test)
     return out

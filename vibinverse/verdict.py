@@ -118,6 +118,7 @@ class VerdictLine:
     second_order: bool = False  # the scene sees the line only at second order: the data show it at 2f
     broad: bool = False  # a resonance too damped to be one (`vibinverse.detection.BROAD_DAMPING`)
     product: str = ""  # the stronger tones it is a product of (`vibinverse.detection.products`)
+    harmonic: str = ""  # k x f of a stronger tone: claimed, and named
 
     def where(self, plus_minus: str = "+-") -> str:
         """ "at 3.466 +- 0.004 Hz", or "" when the frequency is not fitted."""
@@ -143,6 +144,8 @@ class VerdictLine:
             if self.second_order and where:
                 twice = format_number(2 * self.value, ".6g")
                 text += f" (seen at second order: the data's line is at {twice} {self.units})"
+            if self.harmonic:
+                text += f" ({self.harmonic}: a harmonic of a stronger tone, or a mode of its own)"
             return text
         return f"{self.label} not detected (false-alarm probability {format_probability(self.false_alarm_probability)})"
 
@@ -192,6 +195,7 @@ def _line(what: str, diagnostics: dict, parameters: dict, second_order: Sequence
         detected=diagnostics.get(f"{what}_detected") is True,
         broad=diagnostics.get(f"{what}_broad") is True,
         product=str(diagnostics.get(f"{what}_product") or ""),
+        harmonic=str(diagnostics.get(f"{what}_harmonic") or ""),
         delta_loglike=as_number(diagnostics.get(f"{what}_delta_loglike")),
         threshold=as_number(diagnostics.get(f"{what}_threshold")),
         false_alarm_probability=as_number(diagnostics.get(f"{what}_false_alarm_probability")),

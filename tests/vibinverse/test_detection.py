@@ -297,13 +297,14 @@ def _tones(rows):
 
 
 def test_the_shaker_s_intermodulation_products_are_named_and_the_drive_tones_are_not():
-    from vibinverse.detection import combination_text, combinations, products
+    from vibinverse.detection import Product, combination_text, combinations, products
 
     tests, gains = _tones(BEAM)
     out = products(tests, gains, 19.7, 1600.0)
     assert set(out) == {"line_2", "line_3", "line_4", "line_5", "mode_1", "mode_2", "mode_3"}
-    assert out["line_3"] == "120 + 2 x 100.001 Hz" and out["line_2"] == "2 x 149.995 Hz"
-    assert out["mode_1"] == "2 x 149.995 + 100.001 - 120 Hz"
+    assert out["line_3"] == Product("120 + 2 x 100.001 Hz", mixed=True)
+    assert out["line_2"] == Product("2 x 149.995 Hz", mixed=False)  # a harmonic: named, still claimed
+    assert out["mode_1"] == Product("2 x 149.995 + 100.001 - 120 Hz", mixed=True)
     # every combination of order 2-5 of three tones, positive, each at its lowest order
     combos = combinations([150.0, 120.0, 100.0], 5)
     assert combos[300.0] == (2, 0, 0) and combos[30.0] == (1, -1, 0) and min(combos) == 10.0
@@ -324,14 +325,15 @@ def test_a_random_tone_is_read_as_a_product_no_more_often_than_promised():
     for _ in range(n):
         f = rng.uniform(1.0, 1600.0, 4)
         tests, gains = _tones([(f"line_{i}", f[i], None, 10.0 - i) for i in range(4)])
-        called += "line_3" in products(tests, gains, 19.7, 1600.0)
+        called += "line_3" in products(tests, gains, 19.7, 1600.0)  # a harmonic or a product
     assert 0 < called / n <= PRODUCT_CHANCE + 3 * np.sqrt(PRODUCT_CHANCE * (1 - PRODUCT_CHANCE) / n)
     assert called / n < 0.02
 
 
 def test_a_weak_intermodulation_line_is_fitted_named_and_not_claimed():
     """Two lines at 7 and 11.3 Hz and a weak one at 2 x 7 + 11.3 = 25.3 Hz in white noise, fitted
-    with three lines: all three pass the detection threshold, the third is named a product."""
+    with three lines: all three pass the detection threshold, the third is named a product and not
+    claimed. A weak line at 3 x 7 = 21 Hz instead is named a harmonic and still claimed."""
     from vibinverse.bench.robustness_cases import Case, Line
     from vibinverse.bench.robustness_cases import simulate as bench_simulate
     from vibinverse.verdict import verdict
@@ -347,3 +349,11 @@ def test_a_weak_intermodulation_line_is_fitted_named_and_not_claimed():
         assert diag[f"line_{j}_detected"] == (j != third)
     assert re.fullmatch(r"2 x 7\.?\d* \+ 11\.3\d* Hz", diag[f"line_{third}_product"])
     assert "a product of stronger tones, not claimed" in verdict(summary).headline
+    case = Case("harmonic", "", fs=100.0, duration=60.0, modes=(), lines=(*lines[:2], Line(21.0, 0.3)), sigma=1.0)
+    d = bench_simulate(case, 2)
+    _, summary = fitted({"modal": {"modes": 0, "lines": 3}}, Series(d.time, d.intensity, "harmonic"))
+    diag, params = summary["diagnostics"], summary["parameters"]
+    third = next(j for j in range(3) if abs(params[f"lines[{j}].frequency"]["map"] - 21.0) < 0.05)
+    assert all(diag[f"line_{j}_detected"] for j in range(3)) and not any(k.endswith("_product") for k in diag)
+    assert re.fullmatch(r"3 x 7\.?\d* Hz", diag[f"line_{third}_harmonic"])
+    assert "a harmonic of a stronger tone, or a mode of its own" in verdict(summary).headline
