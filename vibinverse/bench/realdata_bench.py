@@ -325,7 +325,7 @@ def fit_series(path: str, spec: SeriesInput) -> dict[str, Any]:
 def fit_channels(path: str, spec: ChannelsInput) -> dict[str, Any]:
     """The modal identification of every response channel of a multi-channel file, as `vibinverse
     fit TABLE` runs it (`load_channels`, `vibinverse.oma.identify`): each mode a claim with its 90 %
-    interval."""
+    interval, unless it is a broad hump (`OmaMode.claimed`)."""
     from vibinverse.io.channels import Channels, load_channels
     from vibinverse.oma import identify
 
@@ -334,7 +334,7 @@ def fit_channels(path: str, spec: ChannelsInput) -> dict[str, Any]:
         ch = Channels(ch.time[spec.skip :], ch.values[spec.skip :], ch.names, ch.units, ch.source, inputs=ch.inputs)
     result = identify(ch, band=spec.band)
     claims = [
-        Claim(m.frequency, "channels", f"modes[{i}]", True, tuple(m.frequency_interval), kind="mode")
+        Claim(m.frequency, "channels", f"modes[{i}]", m.claimed, tuple(m.frequency_interval), kind="mode")
         for i, m in enumerate(result.modes)
     ]
     return {

@@ -29,6 +29,7 @@ import numpy as np
 from scipy import optimize
 from threadpoolctl import threadpool_limits
 
+from vibinverse.detection import BROAD_DAMPING
 from vibinverse.errors import InputError, NumericalError
 from vibinverse.io.channels import Channels
 from vibinverse.oma.band_model import (
@@ -468,6 +469,10 @@ def identify(
             found += _modes_of(fitter, best[1], best[2], rng)
     found.sort(key=lambda m: m.frequency)
     for m in found:
+        if not m.claimed:
+            m.warnings.append(
+                f"damping ratio {m.damping_ratio:.3g} > {BROAD_DAMPING:g}: a broad hump, not claimed as a resonance"
+            )
         tau = 1.0 / (2.0 * math.pi * m.damping_ratio * m.frequency)
         if tau > DECAY_FRACTION * span:
             m.warnings.append(

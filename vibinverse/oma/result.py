@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from vibinverse.detection import BROAD_DAMPING
+
 #: the central probability of every interval reported
 INTERVAL = 0.90
 
@@ -64,6 +66,12 @@ class OmaMode:
     warnings: list[str] = field(default_factory=list)
 
     @property
+    def claimed(self) -> bool:
+        """False for a broad hump (damping ratio above `vibinverse.detection.BROAD_DAMPING`): kept in
+        the table, not claimed as a resonance."""
+        return bool(self.damping_ratio <= BROAD_DAMPING)
+
+    @property
     def has_interval(self) -> bool:
         """False where the posterior was not locally Gaussian: no interval is claimed (NaN)."""
         return bool(np.all(np.isfinite(self.frequency_interval)))
@@ -98,6 +106,7 @@ class OmaMode:
             "band": list(self.band),
             "peak_density": self.level,
             "warnings": list(self.warnings),
+            "claimed": self.claimed,
         }
 
 

@@ -41,3 +41,13 @@ def test_a_mode_without_interval_is_null_in_json_and_says_so_in_text():
     assert "no interval" in text and "nan" not in text.lower()
     page = oma_html(result, "x.csv")
     assert "no interval" in page and ">nan" not in page.lower()
+
+
+def test_a_broad_mode_is_kept_but_not_claimed():
+    """A mode damped above 0.2 (a broad hump: vibinverse.detection.BROAD_DAMPING) stays in the
+    table, its JSON says claimed false, and the realdata bench does not count it as a claim."""
+    from dataclasses import replace
+
+    sharp, broad = _mode(), replace(_mode(), damping_ratio=0.35)
+    assert sharp.claimed and sharp.to_json(("a", "b"))["claimed"] is True
+    assert not broad.claimed and broad.to_json(("a", "b"))["claimed"] is False
