@@ -285,7 +285,7 @@ def products(tests: list[LineTest], gains: dict[str, float], span: float, nyquis
     match one of those combinations with a chance of at most PRODUCT_CHANCE (module docstring)."""
     tol = 1.0 / span
     bases: list[LineTest] = []
-    out: dict[str, str] = {}
+    out: dict[str, Product] = {}
     for test in sorted((t for t in tests if tone(t, span)), key=lambda t: -gains[t.label]):
         hz = float(test.hz or 0.0)  # a tone has a frequency
         freqs = [float(b.hz or 0.0) for b in bases]
