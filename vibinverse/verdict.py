@@ -126,6 +126,11 @@ class VerdictLine:
             return ""
         return f"at {format_value(self.value, self.uncertainty, plus_minus)} {self.units}".rstrip()
 
+    def _named(self, what: str, plus_minus: str) -> str:
+        """ "mode 2 at 4.47 +- 0.08 Hz: `what`" ("mode 2: `what`" when the frequency is not fitted)."""
+        where = self.where(plus_minus)
+        return f"{self.label} {where}: {what}" if where else f"{self.label}: {what}"
+
     def text(self, plus_minus: str = "+-") -> str:
         """ "tilt resonance detected at 3.466 +- 0.004 Hz", "drive line not detected (false-alarm
         probability 0.68)"; a line seen only at second order says that its spectral line is at 2f
@@ -133,11 +138,9 @@ class VerdictLine:
         0.08 Hz: a broad hump, not claimed as a resonance"), and a product of stronger tones ("line 3
         at 319.9998 +- 0.0002 Hz: 120 + 2 x 100.001 Hz, a product of stronger tones, not claimed")."""
         if self.product:
-            where = self.where(plus_minus)
-            return f"{self.label} {where}: {self.product}, a product of stronger tones, not claimed".replace("  ", " ")
+            return self._named(f"{self.product}, a product of stronger tones, not claimed", plus_minus)
         if self.broad:
-            where = self.where(plus_minus)
-            return f"{self.label} {where}: a broad hump, not claimed as a resonance".replace("  ", " ")
+            return self._named("a broad hump, not claimed as a resonance", plus_minus)
         if self.detected:
             where = self.where(plus_minus)
             text = f"{self.label} detected {where}".rstrip() if where else f"{self.label} detected"

@@ -216,3 +216,14 @@ def test_a_slow_sway_in_the_pixels_leaves_trust_undecided_and_gives_detects_read
     (reason,) = [r for r in v.reasons if "slow line" in r]
     assert "2 cycles in the record" in reason and "0.2222 +- 0.11 Hz" in reason
     assert verdict(summary(diagnostics__slow_sway=[])).trusted is True  # none: nothing said
+
+
+def test_a_broad_hump_and_a_product_read_as_such_with_or_without_a_fitted_frequency():
+    from vibinverse.verdict import VerdictLine
+
+    line = VerdictLine("mode_2", "mode 2", False, 900.0, 20.0, 1e-9, broad=True)
+    assert line.text() == "mode 2: a broad hump, not claimed as a resonance"
+    line.parameter, line.value, line.uncertainty = "modes[2].frequency", 4.47, 0.08
+    assert line.text() == "mode 2 at 4.47 +- 0.08 Hz: a broad hump, not claimed as a resonance"
+    product = VerdictLine("line_3", "line 3", False, 50.0, 20.0, 1e-9, product="120 + 2 x 100 Hz")
+    assert product.text() == "line 3: 120 + 2 x 100 Hz, a product of stronger tones, not claimed"
