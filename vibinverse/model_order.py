@@ -52,6 +52,9 @@ modulation test) whose resonance is resolved (bandwidth of a Fourier bin or more
 more than pi decay times) is reported (`OrderResult.ambiguous`, the fit's
 `diagnostics["ambiguous"]`, the report and the verdict): the data cannot tell that resonance from
 a line.
+Then each resonance and line whose band's envelope falls over the record is read as a free decay
+(`settle_decays`: a ring from one excitation, `vibinverse.terms.decay`), taken when it gains ln 19
+in ln L (the same parameters and frequency); not on records of WHITTLE_MIN_SAMPLES or more.
 Then each resonance is tried with a line at the strongest residual peak next to it (`settle_near_lines`,
 within `near_modes`' reach): a resonance that took in a weak line's power widens and moves towards
 it, which hides the peak from the forward step. Such a line's frequency was searched over the
@@ -121,6 +124,7 @@ from vibinverse.errors import NumericalError
 from vibinverse.io.series import FEW_CYCLES, MIN_CYCLES, Series
 from vibinverse.models.modal import (
     GAIN_TERMS,
+    WHITTLE_MIN_SAMPLES,
     ModalModel,
     ModalSpec,
     background,
@@ -133,6 +137,7 @@ from vibinverse.models.modal import (
 )
 from vibinverse.optimize import maximize, maximize_near
 from vibinverse.priors import ParameterSpace
+from vibinverse.terms.decay import envelope_decay, excitation_onset, ring_start
 from vibinverse.terms.drift import RandomWalk
 from vibinverse.terms.noise import AR1, ColouredNoise
 from vibinverse.terms.nuisance import DRIFT_TERMS, NO_DRIFT, NO_NOISE, NOISE_TERMS
@@ -144,6 +149,10 @@ MAX_LINES = 6
 REFIT_TOP = 2  # candidates refitted with every parameter free, per step
 SPLIT_DAMPING = 0.05  # a mode this broad is also tried as two (`split_candidates`)
 SLOW_DAMPING = 0.5  # a mode this damped (or of under FEW_CYCLES cycles) is also tried as a drift
+#: a mode or line whose band's envelope falls by a factor e^-0.5 (to 61 %) or more over the ring
+#: (the record from its onset), read from its first third to its last, is also read as a free decay
+#: (`decay_readings`; a cheap gate: the likelihood decides)
+DECAY_ENVELOPE_FALL = 0.5
 SEARCHED = ("modes", "lines", "drift", "noise", "gain")
 NEAR_BANDWIDTHS, NEAR_BINS = 3.0, 4.0  # a mode this close to a new component is refitted with it (`near_modes`)
 SWAP_BINS = 4.0  # a resonance this narrow (2 zeta f x span, in Fourier bins) is also read as a line (`swapped`)
@@ -217,11 +226,11 @@ class OrderFit:
 
     @property
     def bic(self) -> float:
-        """BIC plus the look-elsewhere term: 2 ln M for each mode and line, M the independent
+        """BIC plus the look-elsewhere term: 2 ln M for each mode, decay and line, M the independent
         frequencies searched (module docstring): the whole spectrum's, or for a line inside one of
         `windows` the window's (its width x span, at least 1)."""
         whole = math.log(self.model.frequencies_searched)
-        look = self.spec.modes * whole
+        look = (self.spec.modes + self.spec.decays) * whole
         for j in range(self.spec.lines):
             f = self.values[f"lines[{j}].frequency"]
             inside = [band_frequencies(w, self.model.span) for w in self.windows if w[0] <= f <= w[1]]
@@ -276,12 +285,13 @@ class OrderResult:
 
 
 def sort_labels(values: dict[str, float], spec: ModalSpec) -> dict[str, float]:
-    """The same model with its modes, and its lines, renumbered by increasing frequency (the
+    """The same model with its modes, its lines and its decays, renumbered by increasing frequency (the
     labelling `ModalModel.log_likelihood` accepts)."""
     out = dict(values)
     for kind, count, fields in (
         ("modes", spec.modes, ("frequency", "damping_ratio", "rms")),
         ("lines", spec.lines, ("frequency", "amplitude", "phase")),
+        ("decays", spec.decays, ("frequency", "damping_ratio", "amplitude")),
     ):
         if count < 2:
             continue
@@ -566,7 +576,7 @@ def screen(series: Series, current: OrderFit, c: Candidate) -> tuple[Candidate, 
 
 
 def renumber(values: dict[str, float], kind: str, drop: int, count: int) -> dict[str, float]:
-    """`values` without component `drop` of `kind` ("modes" or "lines"), the later ones shifted down."""
+    """`values` without component `drop` of `kind` ("modes", "lines" or "decays"), the later ones shifted down."""
     out = {n: v for n, v in values.items() if not n.startswith(f"{kind}[")}
     for i, j in enumerate(k for k in range(count) if k != drop):
         for n, v in values.items():
@@ -595,6 +605,11 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
         back = ["noise.sigma"] if new_spec.white and not spec.white else []  # the white noise brought back
         return Candidate(what, new_spec, starts, [n for n in nuisance if n in names] + back)
 
+    if search["modes"] or search["lines"]:
+        for j in range(spec.decays):
+            f = values[f"decays[{j}].frequency"]
+            start = renumber(values, "decays", j, spec.decays)
+            out.append(move(f"remove the free decay at {f:.4g} Hz", replace(spec, decays=spec.decays - 1), [start]))
     if search["modes"]:
         for i in range(spec.modes):
             f = values[f"modes[{i}].frequency"]
@@ -927,6 +942,79 @@ def settle_swaps(
     return None, ambiguous
 
 
+def decay_readings(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[Candidate]:
+    """Each mode (when modes are searched) and each line (when lines are) of at least FEW_CYCLES
+    cycles whose band's envelope falls over the ring (`envelope_decay`: zeta 2 pi f ring at least
+    DECAY_ENVELOPE_FALL) read as a free decay at its frequency, started from its own damping (a
+    mode's) and from the envelope's. Not on a record of WHITTLE_MIN_SAMPLES or more: a decay runs
+    on the filter's engine only, minutes a reading there (the beam's 63,000 samples with six modes:
+    over a minute), and a record that long is rarely one ring."""
+    spec, values, model = fit.spec, fit.values, fit.model
+    if model.n_obs >= WHITTLE_MIN_SAMPLES:
+        logger.info("model order: free decays are not read on a record this long (the filter's engine only)")
+        return []
+    onset = excitation_onset(model.t, model.y)
+    ring = float(model.t[-1] - model.t[onset])
+    span = max(model.span, series.dt)
+    out: list[Candidate] = []
+    if ring <= 0:
+        return out
+    k = spec.decays
+    new = [f"decays[{k}].{p}" for p in ("frequency", "damping_ratio", "amplitude")]
+    parts = []
+    if search["modes"]:
+        for i in range(spec.modes):
+            f, z, rms = (values[f"modes[{i}].{p}"] for p in ("frequency", "damping_ratio", "rms"))
+            parts.append(("modes", i, spec.modes, f, z, rms, f"the resonance at {f:.5g} Hz read as a free decay"))
+    if search["lines"]:
+        for j in range(spec.lines):
+            f, a = values[f"lines[{j}].frequency"], values[f"lines[{j}].amplitude"]
+            what = f"the line at {f:.6g} Hz read as a free decay"
+            parts.append(("lines", j, spec.lines, f, None, abs(a) / math.sqrt(2.0), what))
+    for kind, i, count, f, z, rms, what in parts:
+        if f * ring < FEW_CYCLES:
+            continue
+        half = max(3.0 / ring, 3.0 * (z or 0.0) * f)
+        fall = envelope_decay(model.y[onset:], series.dt, f, half)
+        if fall * 2.0 * math.pi * f * ring < DECAY_ENVELOPE_FALL:
+            continue
+        start = renumber(values, kind, i, count)
+        zetas = sorted({min(max(x, 1e-5), 0.5) for x in (fall, z) if x})
+        starts = [{**start, **ring_start(f"decays[{k}]", f, x, rms, ring, span)} for x in zetas]
+        fewer = replace(spec, **{kind: count - 1, "decays": k + 1})
+        out.append(Candidate(what, fewer, starts, new))
+    return out
+
+
+def settle_decays(
+    series: Series, current: OrderFit, search: dict[str, bool], rows: list[dict[str, Any]], step: int
+) -> OrderFit | None:
+    """Each mode and line whose band decays over the record read as a free decay (`decay_readings`),
+    fitted with only the decay, the level, the white noise and the modes near it free, and refitted
+    in full when it may win (within 0.5 ln n of the BIC); the best reading is taken when it raises
+    ln L by DECIDED (ln 19) or more (the same parameters and frequency: no look-elsewhere term; a
+    ring and a steady or noise-driven oscillation are both read at 19 : 1 before either is
+    claimed), else None. Each reading is a row of the criterion table."""
+    slack = 0.5 * math.log(current.n)
+    readings = []
+    for c in decay_readings(current, series, search):
+        alt = partial_fit(series, current, c)
+        full = alt.bic < current.bic + slack
+        if full:
+            alt = fit_order(series, c.spec, [alt.values], windows=current.windows)
+        readings.append((c, alt, full))
+        rows.append(_row(step, c.what, alt, current.bic, "full" if full else "partial", False))
+    if not readings:
+        return None
+    i = min(range(len(readings)), key=lambda i: readings[i][1].bic)
+    c, best, full = readings[i]
+    if not (full and best.log_likelihood >= current.log_likelihood + DECIDED):
+        return None
+    rows[i - len(readings)]["kept"] = True
+    logger.info("model order: %s, BIC %.1f -> %.1f", c.what, current.bic, best.bic)
+    return best
+
+
 def near_line_candidates(fit: OrderFit, series: Series) -> list[tuple[Candidate, int, tuple[float, float]]]:
     """For each resonance, a line at the residual spectrum's strongest peak within its `near_band`,
     at least a Fourier bin from it and from every line, as (candidate with the mode's parameters free, the
@@ -1112,6 +1200,8 @@ def choose_order(
             lowest = FEW_CYCLES
         if best is None:  # ... and is each line not a resonance, each narrow resonance not a line?
             best, ambiguous = settle_swaps(series, current, search, rows, step, (max_modes, max_lines))
+        if best is None:  # ... and does none of them ring down from one excitation?
+            best = settle_decays(series, current, search, rows, step)
         final = False
         if best is None:  # ... and has no resonance taken in a weak line next to it?
             best, final, near = settle_near_lines(series, current, search, rows, step, (max_modes, max_lines))
@@ -1298,6 +1388,8 @@ def _best_move(
 
 def _describe(spec: ModalSpec) -> str:
     parts = [f"{spec.modes} modes", f"{spec.lines} lines"]
+    if spec.decays:
+        parts.append(f"{spec.decays} free decays")
     if spec.drifting:
         parts.append(f"{spec.drift} drift")
     parts.append(f"{spec.noise} noise" + ("" if spec.white else " without white noise"))
@@ -1313,6 +1405,7 @@ def _row(step: int, what: str, fit: OrderFit, before: float | None, refit: str, 
         "order": _describe(fit.spec),
         "modes": fit.spec.modes,
         "lines": fit.spec.lines,
+        "decays": fit.spec.decays,
         "drift": fit.spec.drift,
         "noise": fit.spec.noise,
         "gain": fit.spec.gain,

@@ -39,7 +39,7 @@ APPROXIMATIONS = {
 }
 
 #: how a line test's label reads
-_LABELS = {"drive": "drive line", "resonance": "tilt resonance", "vibration": "vibration"}
+_LABELS = {"drive": "drive line", "resonance": "tilt resonance", "vibration": "vibration", "decay": "free decay"}
 
 
 def as_number(v: Any) -> float:

@@ -73,6 +73,34 @@ class ModeRanges:
 
 
 @dataclass(frozen=True)
+class DecayRanges:
+    """A free decay's draw: frequency uniform (Hz), damping ratio log-uniform, a fixed initial
+    amplitude, its phase uniform; it rings from `onset` (a fraction of the record: 0, rung before the
+    record; else a blow there, nothing before it)."""
+
+    frequency: tuple[float, float] = (8.0, 30.0)
+    damping_ratio: tuple[float, float] = (0.003, 0.03)
+    amplitude: float = 1.0
+    onset: float = 0.0
+
+    def draw(self, seed: int) -> tuple[float, float, float]:
+        """(frequency, damping ratio, phase) of data set `seed`."""
+        rng = np.random.default_rng([int(seed), 27_182])
+        f = rng.uniform(*self.frequency)
+        z = math.exp(rng.uniform(math.log(self.damping_ratio[0]), math.log(self.damping_ratio[1])))
+        return f, z, rng.uniform(-math.pi, math.pi)
+
+    def ring(self, t: np.ndarray, seed: int) -> np.ndarray:
+        """The decay at the stamps t (exactly the free oscillator's motion from its onset)."""
+        f, z, ph = self.draw(seed)
+        w = 2.0 * math.pi * f
+        t0 = t[0] + self.onset * (t[-1] - t[0])
+        u = np.clip(t - t0, 0.0, None)
+        out = self.amplitude * np.exp(-z * w * u) * np.cos(w * math.sqrt(1.0 - z * z) * u + ph)
+        return np.where(t >= t0, out, 0.0)
+
+
+@dataclass(frozen=True)
 class CalibrationCase:
     """One way data depart (`base`, a robustness case, or a new one), the model that holds the
     departure (`noise`, `white`, `drift`, `gain` of the modal table; the order is the case's true one), and
@@ -88,6 +116,7 @@ class CalibrationCase:
     gain: bool = False
     modes: ModeRanges | None = ModeRanges()
     line_band: tuple[float, float] | None = None
+    decay: DecayRanges | None = None
 
     def case(self, seed: int) -> Case:
         """The robustness case of data set `seed`: its resonance and line drawn."""
@@ -103,6 +132,8 @@ class CalibrationCase:
     def table(self) -> dict[str, Any]:
         modes, lines = self.base.analyst_order()
         spec = {"modes": modes, "lines": lines, "drift": self.drift, "noise": self.noise, "gain": self.gain}
+        if self.decay is not None:
+            spec["decays"] = 1
         if not self.white:
             spec["white"] = False
         return {"modal": spec}
@@ -151,6 +182,13 @@ CALIBRATION_CASES: dict[str, CalibrationCase] = {
             modes=None,
             line_band=(0.08, 0.15),
         ),
+        CalibrationCase(
+            "free_decay",
+            "a struck ring (8-30 Hz, zeta 0.003-0.03, A 1) from the record's start, 4 s at 200 Hz, white noise 0.3",
+            Case("free_decay", "", fs=200.0, duration=4.0, modes=(), lines=(), sigma=0.3),
+            modes=None,
+            decay=DecayRanges(),
+        ),
     )
 }
 
@@ -165,9 +203,13 @@ def fit_set(name: str, seed: int, method: str = "auto") -> dict[str, Any]:
     cal = CALIBRATION_CASES[name]
     case = cal.case(seed)
     data = simulate(case, seed)
-    summary = vi.fit(vi.series(data.time, data.intensity), cal.table(), method=method).summary()
+    y, truth = data.intensity, truth_of(case)
+    if cal.decay is not None:  # the ring added, its frequency and damping scored (not its amplitude:
+        y = y + cal.decay.ring(data.time, seed)  # the fit's is the scale of a Rayleigh law)
+        f, z, _ = cal.decay.draw(seed)
+        truth |= {"decays[0].frequency": f, "decays[0].damping_ratio": z}
+    summary = vi.fit(vi.series(data.time, y), cal.table(), method=method).summary()
     p = summary["parameters"]
-    truth = truth_of(case)
     estimates = {k: [p[k][q] for q in ("q05", "q95", "median", "mean", "sd")] for k in truth if k in p}
     diag = summary.get("diagnostics") or {}
     detected = {k[: -len("_detected")]: bool(v) for k, v in diag.items() if k.endswith("_detected")}
@@ -182,7 +224,7 @@ def fit_set(name: str, seed: int, method: str = "auto") -> dict[str, Any]:
 def detection_label(name: str) -> str | None:
     """The detection test of a parameter's component ("modes[0].rms" -> "mode_0", "lines[1]..." ->
     "line_1"); None for a parameter of no component."""
-    m = re.match(r"(modes|lines)\[(\d+)\]\.", name)
+    m = re.match(r"(modes|lines|decays)\[(\d+)\]\.", name)
     return f"{m.group(1)[:-1]}_{m.group(2)}" if m else None
 
 

@@ -209,8 +209,8 @@ def read_series(path: Path, spec: SeriesInput) -> tuple[Any, str]:
 
 
 # ------------------------------------------------------------------------------ what a fit claims
-_COMPONENT = re.compile(r"^(modes|lines)\[(\d+)\]\.frequency$")
-_TEST = {"modes": "mode", "lines": "line"}  # the detection test's stem in the diagnostics
+_COMPONENT = re.compile(r"^(modes|lines|decays)\[(\d+)\]\.frequency$")
+_TEST = {"modes": "mode", "lines": "line", "decays": "decay"}  # the detection test's stem in the diagnostics
 
 
 def claims_from_summary(summary: dict[str, Any], stage: str = "fit") -> list[Claim]:

@@ -55,8 +55,8 @@ def gain_change(ph, s, prev_gain, prev_s):  # pragma: no cover - compiled; teste
     delta = abs(s - prev_s) / s
     for i in range(n):
         d = abs(ph[i] / s - prev_gain[i])
-        if d > 0.0:
-            delta = max(delta, d / scale)
+        if d > 0.0:  # a gain that fell to 0 (a free decay's covariance underflowed) is a change
+            delta = max(delta, d / scale) if scale > 0.0 else math.inf
     return delta
 
 
@@ -585,9 +585,9 @@ def filter_two_states(
                 delta = abs(s - prev_s) / s
                 d0, d1 = abs(k0 - pg0), abs(k1 - pg1)
                 if d0 > 0.0:
-                    delta = max(delta, d0 / scale)
+                    delta = max(delta, d0 / scale) if scale > 0.0 else math.inf
                 if d1 > 0.0:
-                    delta = max(delta, d1 / scale)
+                    delta = max(delta, d1 / scale) if scale > 0.0 else math.inf
                 calm, frozen = hold_step(delta, last_delta, calm, freeze)
                 if frozen:
                     fu = u

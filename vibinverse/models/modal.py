@@ -7,6 +7,11 @@ and nuisance terms, all in one Kalman filter (`ModalModel`, registered as "modal
   `modes[i].rms` the stationary RMS in the intensity's units): q'' + 2 zeta w q' + w^2 q = xi(t),
   w = 2 pi f, xi continuous white noise of intensity kappa = 4 zeta w^3 rms^2. Two states (q, q').
 - lines: L deterministic sinusoids (`lines[j].frequency`, `.amplitude`, `.phase`): the mean.
+- free decays: D rings from one excitation (`decays[j].frequency`, `.damping_ratio`,
+  `.amplitude`; `vibinverse.terms.decay.FreeDecay`): the oscillator without process noise, its
+  state drawn N(0, A^2 diag(1, w^2)) at the onset (`excitation_onset`: the first sample, or a
+  blow's, whose step gets a table entry of its own), zero before. The filter's engine only (a
+  ring is not stationary: no Whittle); scaled by the gain drift like the modes.
 - d: drift (`drift.rate`, the RMS change per sqrt(second)): a random walk started at 0 (so that
   `level` is the series' level at the first sample), or an integrated random walk (drift
   "integrated": a slope state driven by white noise of intensity rate^2, level and slope started
@@ -53,7 +58,7 @@ Label switching: the modes (and the lines) are exchangeable, so `log_likelihood`
 the modes' frequencies are strictly increasing, and the lines' too (a sorted-frequency constraint;
 the priors of all modes are the same window, lo..Nyquist). Mode 0 is always the lowest.
 
-The table: `{"modal": {"modes": 3, "lines": 0, "drift": True, "noise": "ar1"}}`; `drift` is False
+The table: `{"modal": {"modes": 3, "lines": 0, "decays": 0, "drift": True, "noise": "ar1"}}`; `drift` is False
 (none), True or "walk", or "integrated"; `noise` is "white", "ar1" or "1/f"; `white` is True
 (default) or False (no white sensor noise: only beside "ar1" or "1/f"). Optional
 `"start": {name: value}` is the first starting point (the order search writes its optimum there),
@@ -101,7 +106,15 @@ from vibinverse.models.base import (
     register_model,
 )
 from vibinverse.priors import Prior
-from vibinverse.terms.base import INTEGRATED_WALK_FORM, OSCILLATOR_FORM, WALK_FORM, DataFacts, Term
+from vibinverse.terms.base import (
+    FREE_DECAY_FORM,
+    INTEGRATED_WALK_FORM,
+    OSCILLATOR_FORM,
+    WALK_FORM,
+    DataFacts,
+    Term,
+)
+from vibinverse.terms.decay import FreeDecay, excitation_onset, ring_start
 from vibinverse.terms.drift import GAIN_LIMIT, GAIN_TERMS, gain_basis, gain_names
 from vibinverse.terms.noise import flicker_terms
 from vibinverse.terms.nuisance import DRIFT_KINDS, DRIFT_TERMS, NOISE_KINDS, NOISE_TERMS, NuisanceKinds
@@ -133,6 +146,7 @@ class ModalSpec(NuisanceKinds):
     noise: str = "white"
     gain: int = 0
     white: bool = True
+    decays: int = 0
 
     def __post_init__(self) -> None:
         if not self.white and not self.coloured:
@@ -150,14 +164,14 @@ class ModalSpec(NuisanceKinds):
             m = {}
         if not isinstance(m, dict):
             raise SceneError("modal: must be a table, e.g. {modes = 2, lines = 0, drift = true, noise = 'ar1'}")
-        unknown = set(m) - {"modes", "lines", "drift", "noise", "gain", "white", "values", "start", "windows"}
+        unknown = set(m) - {"modes", "lines", "decays", "drift", "noise", "gain", "white", "values", "start", "windows"}
         if unknown:
             raise SceneError(
-                f"modal.{sorted(unknown)[0]}: unknown key; allowed: modes, lines, drift, noise, gain, white, values, "
-                "start, windows"
+                f"modal.{sorted(unknown)[0]}: unknown key; allowed: modes, lines, decays, drift, noise, gain, white, "
+                "values, start, windows"
             )
         out = {}
-        for key in ("modes", "lines"):
+        for key in ("modes", "lines", "decays"):
             v = m.get(key, 0)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= int(v) <= 20:
                 raise SceneError(f"modal.{key}: {v!r}; allowed: an integer in [0, 20]")
@@ -182,7 +196,7 @@ class ModalSpec(NuisanceKinds):
         white = m.get("white", True)
         if not isinstance(white, (bool, np.bool_)):
             raise SceneError(f"modal.white: {white!r}; allowed: true, or false beside noise = 'ar1' or '1/f'")
-        return cls(out["modes"], out["lines"], drift, noise, int(gain), bool(white))
+        return cls(out["modes"], out["lines"], drift, noise, int(gain), bool(white), out["decays"])
 
     def table(self) -> dict[str, Any]:
         """The `modal` sub-table of this order."""
@@ -193,6 +207,7 @@ class ModalSpec(NuisanceKinds):
             "noise": self.noise,
             "gain": self.gain,
             "white": self.white,
+            **({"decays": self.decays} if self.decays else {}),
         }
 
     def names(self) -> list[str]:
@@ -202,6 +217,8 @@ class ModalSpec(NuisanceKinds):
             out += [f"modes[{i}].frequency", f"modes[{i}].damping_ratio", f"modes[{i}].rms"]
         for j in range(self.lines):
             out += [f"lines[{j}].frequency", f"lines[{j}].amplitude", f"lines[{j}].phase"]
+        for j in range(self.decays):
+            out += FreeDecay(f"decays[{j}]").names()
         for term in self.nuisance_terms():
             out += term.names()
         out += gain_names(self.gain)
@@ -275,7 +292,8 @@ def _oscillator(w, a, kappa, t, phi, q, o):  # pragma: no cover - compiled; test
 def _fill_tables(kinds, pars, offsets, steps, phis, qs, p0):  # pragma: no cover - compiled
     """(Phi, Q) of every block for every step, and the initial covariance P0. Block b starts at
     state offsets[b]; kinds: oscillator (w, a = zeta w, rms), random walk (rate^2), integrated
-    random walk (rate^2), Ornstein-Uhlenbeck (time, variance): `vibinverse.terms.base`'s forms."""
+    random walk (rate^2), Ornstein-Uhlenbeck (time, variance), free decay (w, a = zeta w, amplitude:
+    its onset's covariance is written by `FreeDecay.excite`): `vibinverse.terms.base`'s forms."""
     phis[:] = 0.0
     qs[:] = 0.0
     p0[:] = 0.0
@@ -289,6 +307,9 @@ def _fill_tables(kinds, pars, offsets, steps, phis, qs, p0):  # pragma: no cover
                 _oscillator(w, a, kappa, steps[u], phis[u], qs[u], o)
             p0[o, o] = rms * rms
             p0[o + 1, o + 1] = w * w * rms * rms
+        elif kind == FREE_DECAY_FORM:  # no process noise; its onset's covariance is written after
+            for u in range(steps.shape[0]):
+                _oscillator(pars[b, 0], pars[b, 1], 0.0, steps[u], phis[u], qs[u], o)
         elif kind == WALK_FORM:
             for u in range(steps.shape[0]):
                 phis[u, o, o] = 1.0
@@ -533,6 +554,15 @@ class ModalModel(SignalModel):
         else:
             self.steps, self.idx = unique_steps(self.t, rtol=1e-9)
             self.steps = np.ascontiguousarray(self.steps, dtype=float)
+        # a free decay's onset (`excitation_onset`): the first sample, or a blow's, whose step gets a
+        # table entry of its own (the decays' fresh state is that step's process noise)
+        self.onset, self.event = 0, None
+        if self.spec.decays:
+            self.onset = excitation_onset(self.t, self.y)
+            if self.onset > 0:
+                self.steps = np.append(self.steps, self.steps[self.idx[self.onset]])
+                self.idx = self.idx.copy()
+                self.idx[self.onset] = self.event = self.steps.size - 1
         self._names = self.spec.names()
         self.nuisance_terms = self.spec.nuisance_terms()
         self.facts = self.data_facts()
@@ -554,12 +584,17 @@ class ModalModel(SignalModel):
         """Whittle's engine for this model's record (`whittle_engine`, its ordinates grouped `bins`
         at a time; None: the Kalman filter's), with its caches emptied: the differences' periodogram
         without lines, the leading samples that carry the level and their mean (`_whittle`)."""
-        self.spectral = whittle_engine(
-            self.series,
-            not bool(self.good.all()),
-            bool(self.spec.gain),
-            bool(np.any(self.kinds == INTEGRATED_WALK_FORM)),
-            bins,
+        # a free decay is not stationary: the filter's engine only
+        self.spectral = (
+            None
+            if self.spec.decays
+            else whittle_engine(
+                self.series,
+                not bool(self.good.all()),
+                bool(self.spec.gain),
+                bool(np.any(self.kinds == INTEGRATED_WALK_FORM)),
+                bins,
+            )
         )
         self._power: np.ndarray | None = None
         self._transform: np.ndarray | None = None
@@ -589,8 +624,15 @@ class ModalModel(SignalModel):
     # -------------------------------------------------------------- state-space layout
     def _layout(self) -> None:
         s = self.spec
-        # the terms with states, in the state's order: the modes, then the drift and the coloured noise
-        self.state_terms = [*(Oscillator(f"modes[{i}]") for i in range(s.modes)), *self.nuisance_terms]
+        # the terms with states, in the state's order: the modes, the free decays, then the drift and
+        # the coloured noise
+        ring = float(self.t[-1] - self.t[self.onset])
+        self.decay_terms = [FreeDecay(f"decays[{j}]", self.event, ring) for j in range(s.decays)]
+        self.state_terms = [
+            *(Oscillator(f"modes[{i}]") for i in range(s.modes)),
+            *self.decay_terms,
+            *self.nuisance_terms,
+        ]
         self._state_names = [term.names() for term in self.state_terms]
         kinds, offsets, sizes = [], [], []
         o = 0
@@ -613,7 +655,7 @@ class ModalModel(SignalModel):
         self.lo, self.hi, self.h = lo, hi, h
         self.block_starts, self.block_sizes = block_layout(lo, hi)
         self._nstate = max(o, 1)
-        self.n_scaled = 2 * s.modes  # the states the gain drift multiplies: the modes'
+        self.n_scaled = 2 * (s.modes + s.decays)  # the states the gain drift multiplies: the modes' and decays'
         self.gain_basis = gain_basis(self.t, s.gain) if s.gain else np.zeros((0, self.t.size))
         # the tables' arrays, reused between calls, one set per thread (`releases_gil`: threads
         # evaluate walkers at once); a dict by thread id stays picklable
@@ -671,6 +713,8 @@ class ModalModel(SignalModel):
         if b == 0:
             pars[0, 0] = 0.0
         _fill_tables(self.kinds, pars, self.offsets, self.steps, phis, qs, p0)
+        for j, term in enumerate(self.decay_terms):  # after the modes' blocks, 2 states each
+            term.excite({n: v(n) for n in term.names()}, qs, p0, 2 * (s.modes + j))
         if s.lines:
             f = np.array([v(f"lines[{j}].frequency") for j in range(s.lines)])
             a = np.array([v(f"lines[{j}].amplitude") for j in range(s.lines)])
@@ -724,17 +768,18 @@ class ModalModel(SignalModel):
         """Samples over which the filter's gain must stay converged before it is held
         (`block_filter`'s `freeze`): one period of the slowest mode at the shortest step, plus one;
         1 without modes (walks and Ornstein-Uhlenbeck states converge without oscillating)."""
-        if not self.spec.modes:
+        rings = [f"modes[{i}]" for i in range(self.spec.modes)] + [f"decays[{j}]" for j in range(self.spec.decays)]
+        if not rings:
             return 1
-        f = min(self.value(values, f"modes[{i}].frequency") for i in range(self.spec.modes))
+        f = min(self.value(values, f"{c}.frequency") for c in rings)
         step = float(self.steps.min())
         if not f > 0 or not step > 0:
             return self.t.size
         return int(min(self.t.size, math.ceil(1.0 / (f * step)) + 1))
 
     def _sorted(self, values: dict[str, float]) -> bool:
-        """Modes and lines each in strictly increasing frequency (the label-switching constraint)."""
-        for kind, count in (("modes", self.spec.modes), ("lines", self.spec.lines)):
+        """Modes, lines and decays each in strictly increasing frequency (the label-switching constraint)."""
+        for kind, count in (("modes", self.spec.modes), ("lines", self.spec.lines), ("decays", self.spec.decays)):
             prev = -math.inf
             for i in range(count):
                 f = self.value(values, f"{kind}[{i}].frequency")
@@ -791,7 +836,7 @@ class ModalModel(SignalModel):
                 return False
             if n.endswith(("frequency", "damping_ratio", "time")) and not val > 0:
                 return False
-            if n.endswith(("rms", "sigma", "rate")) and val < 0:
+            if (n.endswith(("rms", "sigma", "rate")) or n.startswith("decays[")) and val < 0:
                 return False
         return True
 
@@ -1069,7 +1114,7 @@ class ModalModel(SignalModel):
         # the model's nuisance terms answer for their parameters; a name the model lacks, the first
         # registered drift or coloured noise that has it
         kinds = (cls() for cls in (*DRIFT_TERMS.values(), *NOISE_TERMS.values()) if cls is not None)
-        for term in (*self.nuisance_terms, *kinds):
+        for term in (*self.decay_terms, *self.nuisance_terms, *kinds):
             if name in term.names():
                 return term.units(name, iu)
         if name.endswith(".rms"):
@@ -1113,7 +1158,7 @@ class ModalModel(SignalModel):
             centre = self.value({}, f"lines[{j}].phase")  # not wrapped: the start stays at the centre
             centre = centre if math.isfinite(centre) else 0.0
             out[f"lines[{j}].phase"] = Prior("uniform", (centre - math.pi, centre + math.pi))
-        for term in self.nuisance_terms:
+        for term in (*self.decay_terms, *self.nuisance_terms):
             out.update(term.priors(self.facts))
         for n in gain_names(self.spec.gain):
             out[n] = Prior("uniform", (-GAIN_LIMIT, GAIN_LIMIT))
@@ -1156,7 +1201,7 @@ class ModalModel(SignalModel):
         # a drift, a gain drift or a coloured noise puts its power at low frequencies, the first
         # bin's above all: the peaks are searched over its background there (`background`)
         ranked = power / background(freqs, power) if s.drifting or s.coloured or s.gain else power
-        need = s.modes + s.lines
+        need = s.modes + s.lines + s.decays
         peaks = spectral_peaks(
             freqs, ranked, (first, nyq * 0.999), width, separation=3 * width * (freqs[1] - freqs[0]), limit=need
         )
@@ -1187,10 +1232,13 @@ class ModalModel(SignalModel):
         for assign in assignments:
             g = dict(base)
             line_f = sorted(picked[i] for i in assign[: s.lines])
-            mode_f = sorted(max(picked[i], lo) for i in assign[s.lines :])  # the first bin lies under the prior
+            # the first bin lies under the prior
+            mode_f = sorted(max(picked[i], lo) for i in assign[s.lines : s.lines + s.modes])
             for i, f in enumerate(mode_f):
                 zeta, rms = mode_start(freqs, power, f, n, floor)
                 g[f"modes[{i}].frequency"], g[f"modes[{i}].damping_ratio"], g[f"modes[{i}].rms"] = f, zeta, rms
+            for j, f in enumerate(sorted(max(picked[i], lo) for i in assign[s.lines + s.modes :])):
+                g.update(self.decay_start(j, f, *mode_start(freqs, power, f, n, floor)))
             for j, f in enumerate(line_f):
                 i = int(np.argmin(np.abs(freqs - f)))  # the highest raw bin near the smoothed peak
                 i = max(i - width, 0) + int(np.argmax(power[max(i - width, 0) : i + width + 1]))
@@ -1200,6 +1248,11 @@ class ModalModel(SignalModel):
                 g[f"lines[{j}].frequency"], g[f"lines[{j}].amplitude"], g[f"lines[{j}].phase"] = float(best), a, ph
             out.append({k: g[k] for k in self._names})
         return out
+
+    def decay_start(self, j: int, f: float, zeta: float, rms: float) -> dict[str, float]:
+        """Decay j's start from a resonance's reading of its peak (f, zeta, the record's RMS there:
+        `ring_start`)."""
+        return ring_start(f"decays[{j}]", f, zeta, rms, float(self.t[-1] - self.t[self.onset]), max(self.span, self.dt))
 
     def gain_start(self, terms: int | None = None) -> np.ndarray:
         """Starting coefficients of a gain drift of `terms` cosines (default: the model's): the
@@ -1224,7 +1277,8 @@ class ModalModel(SignalModel):
         return self._spectral_guesses()
 
     def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
-        """Each line (its amplitude to 0) and each mode (its rms to 0), with the parameters near it
+        """Each line (its amplitude to 0), each mode (its rms to 0) and each free decay (its amplitude
+        to 0), with the parameters near it
         (`near_parameters`)."""
         out = []
         for j in range(self.spec.lines):
@@ -1243,6 +1297,20 @@ class ModalModel(SignalModel):
                     f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None, near=near, damping=damping, hz=hz
                 )
             )
+        for j in range(self.spec.decays):
+            f = f"decays[{j}].frequency"
+            near = self.near_parameters(values, f"decays[{j}]")
+            damping, hz = self.value(values, f"decays[{j}].damping_ratio"), self.value(values, f)
+            out.append(
+                LineTest(
+                    f"decay_{j}",
+                    {f"decays[{j}].amplitude": 0.0},
+                    f if f in free else None,
+                    near=near,
+                    damping=damping,
+                    hz=hz,
+                )
+            )
         return out
 
     def near_parameters(self, values: dict[str, float], component: str) -> tuple[str, ...]:
@@ -1251,7 +1319,7 @@ class ModalModel(SignalModel):
         Fourier bins plus NEAR_REACH_WIDTHS half-power half-widths (zeta f, of either) of it, and
         every parameter that is not a mode's or a line's (level, noise, drift, gain: broadband)."""
         v = lambda n: self.value(values, n)
-        width = lambda c: v(f"{c}.damping_ratio") * v(f"{c}.frequency") if c.startswith("modes") else 0.0
+        width = lambda c: v(f"{c}.damping_ratio") * v(f"{c}.frequency") if c.startswith(("modes", "decays")) else 0.0
         f0, w0 = v(f"{component}.frequency"), width(component)
         bins = NEAR_REACH_BINS / max(self.span, self.dt)
         near = [
@@ -1259,10 +1327,12 @@ class ModalModel(SignalModel):
             for c in (
                 *(f"modes[{i}]" for i in range(self.spec.modes)),
                 *(f"lines[{j}]" for j in range(self.spec.lines)),
+                *(f"decays[{j}]" for j in range(self.spec.decays)),
             )
             if abs(v(f"{c}.frequency") - f0) <= bins + NEAR_REACH_WIDTHS * max(w0, width(c))
         ]
-        return tuple(n for n in self._names if not n.startswith(("modes[", "lines[")) or n.split(".")[0] in near)
+        rings = ("modes[", "lines[", "decays[")
+        return tuple(n for n in self._names if not n.startswith(rings) or n.split(".")[0] in near)
 
     def fisher(self, values: dict[str, float], names: list[str]) -> np.ndarray:
         """The observed information -d^2 log L / d theta^2 at `values` (its expectation is the
@@ -1323,6 +1393,9 @@ class ModalModel(SignalModel):
                     "harmonic": multiple,
                 }
             )
+        onset = float(self.t[self.onset] - self.t[0])
+        for j, term in enumerate(self.decay_terms):
+            out.append({**term.component({n: v(n) for n in term.names()}, self.facts), "index": j, "onset": onset})
         for term in self.nuisance_terms:
             out.append(term.component({n: v(n) for n in term.names()}, self.facts))
         if s.gain:

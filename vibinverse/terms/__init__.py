@@ -4,6 +4,7 @@ builds the nuisance terms a table or the command line asks for."""
 
 from vibinverse.engines.state_space import StateSpace
 from vibinverse.terms.base import TERMS, DataFacts, Term, TermSum, register_term
+from vibinverse.terms.decay import FreeDecay
 from vibinverse.terms.drift import GainDrift, IntegratedWalk, RandomWalk
 from vibinverse.terms.noise import AR1, Flicker, White
 from vibinverse.terms.resonance import Oscillator
@@ -13,6 +14,7 @@ __all__ = [
     "TERMS",
     "DataFacts",
     "Flicker",
+    "FreeDecay",
     "GainDrift",
     "IntegratedWalk",
     "Oscillator",

@@ -71,9 +71,10 @@ class DataFacts:
 
 
 #: the elementary blocks a compiled kernel fills by number (`vibinverse.models.modal`'s tables): a
-#: 2 x 2 oscillator (w, zeta w, rms), a random walk (rate^2), an integrated random walk (rate^2) and
-#: an Ornstein-Uhlenbeck state (time, variance)
-OSCILLATOR_FORM, WALK_FORM, INTEGRATED_WALK_FORM, OU_FORM = 0, 1, 2, 3
+#: 2 x 2 oscillator (w, zeta w, rms), a random walk (rate^2), an integrated random walk (rate^2),
+#: an Ornstein-Uhlenbeck state (time, variance) and a free decay (w, zeta w, amplitude: an
+#: oscillator without process noise, its initial state drawn at its onset)
+OSCILLATOR_FORM, WALK_FORM, INTEGRATED_WALK_FORM, OU_FORM, FREE_DECAY_FORM = 0, 1, 2, 3, 4
 
 
 class Term(ABC):

@@ -148,3 +148,21 @@ def test_few_cycle_coverage_over_150_data_sets_would_fail_intervals_20_percent_t
         assert row["coverage90"] >= 0.85, row
         assert row["narrow80"] < 0.85, row  # the check has the power to see intervals 20 % too narrow
         assert 0.7 < row["z_rms"] < 1.3 and row["far"] == 0.0, row
+
+
+def test_the_free_decay_case_draws_its_ring_in_its_ranges_and_fits_one_decay():
+    cal = cb.CALIBRATION_CASES["free_decay"]
+    assert cal.table()["modal"]["decays"] == 1
+    draws = np.array([cal.decay.draw(s)[:2] for s in range(50)])
+    assert np.all((draws[:, 0] >= 8.0) & (draws[:, 0] <= 30.0)) and np.ptp(draws[:, 0]) > 10.0
+    assert np.all((draws[:, 1] >= 0.003) & (draws[:, 1] <= 0.03))
+    t = np.arange(800) / 200.0
+    f, z, ph = cal.decay.draw(3)
+    assert cal.decay.ring(t, 3)[0] == pytest.approx(math.cos(ph))
+    late = cb.DecayRanges(onset=0.25)
+    ring = late.ring(t, 3)
+    t0 = 0.25 * t[-1]
+    w, u = 2 * math.pi * f, t[200] - t0
+    assert np.all(ring[t < t0] == 0.0) and t[199] < t0 <= t[200]
+    assert ring[200] == pytest.approx(math.exp(-z * w * u) * math.cos(w * math.sqrt(1 - z * z) * u + ph))
+    assert cb.detection_label("decays[0].frequency") == "decay_0"
