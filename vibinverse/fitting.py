@@ -67,7 +67,8 @@ def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]
     order): `modes`, `lines`, `drift` and `noise` given in the table are kept, the others chosen
     by `vibinverse.model_order.choose_order` (stepwise BIC), whose optimum seeds the fit. A whole
     order of modes and lines fixed without a `start` is seeded by `model_order.fit_fixed` (its
-    modes and lines also built up one at a time, as the search would)."""
+    modes and lines also built up one at a time, as the search would); free decays without an
+    `onset` get the likeliest (`model_order.set_onset`), written into the table."""
     from vibinverse.model_order import SEARCHED, choose_order, fit_fixed
 
     table = {"modal": {}} if scene is None else scene_table(scene, overrides)
@@ -81,8 +82,11 @@ def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]
 
         spec = ModalSpec.from_table(table)  # one-line errors before any work
         if all(k in modal for k in SEARCHED):
-            if "start" not in modal and spec.modes and spec.lines:
-                modal["start"] = dict(fit_fixed(data, spec).values)
+            if "start" not in modal and ((spec.modes and spec.lines) or (spec.decays and spec.onset is None)):
+                seeded = fit_fixed(data, spec)  # decays without an onset: the likeliest (`set_onset`)
+                modal["start"] = dict(seeded.values)
+                if spec.decays:
+                    modal["onset"] = seeded.spec.onset
             return table, None
         order = choose_order(data, table)
     chosen = order.table()["modal"]

@@ -53,8 +53,10 @@ more than pi decay times) is reported (`OrderResult.ambiguous`, the fit's
 `diagnostics["ambiguous"]`, the report and the verdict): the data cannot tell that resonance from
 a line.
 Then each resonance and line whose band's envelope falls over the record is read as a free decay
-(`settle_decays`: a ring from one excitation, `vibinverse.terms.decay`), taken when it gains ln 19
-in ln L (the same parameters and frequency); not on records of WHITTLE_MIN_SAMPLES or more.
+(`settle_decays`: a ring from one excitation, `vibinverse.terms.decay`, its onset where the
+likelihood is highest, `set_onset`), taken when it gains ln 19 in ln L (the same parameters and
+frequency), plus 0.5 ln n for an onset inside the record; not on records of WHITTLE_MIN_SAMPLES or
+more.
 Then each resonance is tried with a line at the strongest residual peak next to it (`settle_near_lines`,
 within `near_modes`' reach): a resonance that took in a weak line's power widens and moves towards
 it, which hides the peak from the forward step. Such a line's frequency was searched over the
@@ -115,6 +117,7 @@ import functools
 import logging
 import math
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -153,6 +156,8 @@ SLOW_DAMPING = 0.5  # a mode this damped (or of under FEW_CYCLES cycles) is also
 #: (the record from its onset), read from its first third to its last, is also read as a free decay
 #: (`decay_readings`; a cheap gate: the likelihood decides)
 DECAY_ENVELOPE_FALL = 0.5
+#: a decay reading's onsets: every ONSET_STEP of the record over its first ONSET_REACH (`decay_readings`)
+ONSET_STEP, ONSET_REACH = 0.02, 0.75
 SEARCHED = ("modes", "lines", "drift", "noise", "gain")
 NEAR_BANDWIDTHS, NEAR_BINS = 3.0, 4.0  # a mode this close to a new component is refitted with it (`near_modes`)
 SWAP_BINS = 4.0  # a resonance this narrow (2 zeta f x span, in Fourier bins) is also read as a line (`swapped`)
@@ -605,7 +610,7 @@ def neighbours(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[C
         back = ["noise.sigma"] if new_spec.white and not spec.white else []  # the white noise brought back
         return Candidate(what, new_spec, starts, [n for n in nuisance if n in names] + back)
 
-    if search["modes"] or search["lines"]:
+    if search.get("decays", True) and (search["modes"] or search["lines"]):
         for j in range(spec.decays):
             f = values[f"decays[{j}].frequency"]
             start = renumber(values, "decays", j, spec.decays)
@@ -942,20 +947,66 @@ def settle_swaps(
     return None, ambiguous
 
 
+def onset_profile(
+    series: Series, spec: ModalSpec, values_at: Callable[[int], dict[str, float]], samples: Iterable[int]
+) -> tuple[float, int, dict[str, float]]:
+    """(ln L, sample, values) at the best of the decays' onsets at `samples` (each the order `spec`
+    with its onset there, at the values `values_at(sample)`)."""
+    best: tuple[float, int, dict[str, float]] = (-math.inf, 0, {})
+    t = series.time
+    for i in samples:
+        values = values_at(i)
+        model = ModalModel({"modal": {**replace(spec, onset=float(t[i] - t[0])).table(), "start": values}}, series)
+        ll = model.log_likelihood(values)
+        if ll > best[0]:
+            best = (ll, i, values)
+    return best
+
+
+def fine_samples(i: int, n: int) -> range:
+    """The samples within ONSET_STEP of the record around sample i."""
+    step = max(1, int(ONSET_STEP * n))
+    return range(max(0, i - step), min(n - 1, i + step + 1))
+
+
+def set_onset(series: Series, fit: OrderFit) -> OrderFit:
+    """`fit` with its decays' onset where the likelihood at its values is highest (`onset_profile`:
+    the record's start, every ONSET_STEP of the record over its first ONSET_REACH, then every sample
+    around the best), refitted there when that is not where it was."""
+    n = fit.model.t.size
+    at = fit.model.onset
+    step = max(1, int(ONSET_STEP * n))
+    hold = lambda i: fit.values  # the same values at every onset
+    _, best, _ = onset_profile(series, fit.spec, hold, sorted({0, at, *range(0, int(ONSET_REACH * n), step)}))
+    if best > 0:
+        _, best, _ = onset_profile(series, fit.spec, hold, [0, at, *fine_samples(best, n)])
+    here = replace(fit, spec=replace(fit.spec, onset=float(series.time[at] - series.time[0])))
+    if best == at:
+        return here
+    moved = fit_order(series, replace(fit.spec, onset=float(series.time[best] - series.time[0])), [fit.values])
+    return moved if moved.log_likelihood > fit.log_likelihood else here
+
+
 def decay_readings(fit: OrderFit, series: Series, search: dict[str, bool]) -> list[Candidate]:
     """Each mode (when modes are searched) and each line (when lines are) of at least FEW_CYCLES
-    cycles whose band's envelope falls over the ring (`envelope_decay`: zeta 2 pi f ring at least
-    DECAY_ENVELOPE_FALL) read as a free decay at its frequency, started from its own damping (a
-    mode's) and from the envelope's. Not on a record of WHITTLE_MIN_SAMPLES or more: a decay runs
-    on the filter's engine only, minutes a reading there (the beam's 63,000 samples with six modes:
-    over a minute), and a record that long is rarely one ring."""
+    cycles whose band's envelope falls over the ring (`envelope_decay`, from the data's blow, or the
+    record's start: zeta 2 pi f ring at least DECAY_ENVELOPE_FALL) read as a free decay at its
+    frequency, started from its own damping (a mode's) and from the envelope's, its onset where the
+    likelihood at that start is highest (`onset_profile`: the record's start, every ONSET_STEP of
+    the record over its first ONSET_REACH, then every sample around the best). Not on a record of
+    WHITTLE_MIN_SAMPLES or more: a decay runs on the filter's engine only, minutes a reading there
+    (the beam's 63,000 samples with six modes: over a minute), and a record that long is rarely
+    one ring."""
     spec, values, model = fit.spec, fit.values, fit.model
+    if not search.get("decays", True):
+        return []
     if model.n_obs >= WHITTLE_MIN_SAMPLES:
         logger.info("model order: free decays are not read on a record this long (the filter's engine only)")
         return []
     onset = excitation_onset(model.t, model.y)
     ring = float(model.t[-1] - model.t[onset])
     span = max(model.span, series.dt)
+    n = model.t.size
     out: list[Candidate] = []
     if ring <= 0:
         return out
@@ -980,9 +1031,18 @@ def decay_readings(fit: OrderFit, series: Series, search: dict[str, bool]) -> li
             continue
         start = renumber(values, kind, i, count)
         zetas = sorted({min(max(x, 1e-5), 0.5) for x in (fall, z) if x})
-        starts = [{**start, **ring_start(f"decays[{k}]", f, x, rms, ring, span)} for x in zetas]
         fewer = replace(spec, **{kind: count - 1, "decays": k + 1})
-        out.append(Candidate(what, fewer, starts, new))
+
+        def at(sample: int, zeta: float = zetas[0]) -> dict[str, float]:
+            left = float(series.time[-1] - series.time[sample])
+            return {**start, **ring_start(f"decays[{k}]", f, zeta, rms, left, span)}
+
+        step = max(1, int(ONSET_STEP * n))
+        _, best, _ = onset_profile(series, fewer, at, range(0, int(ONSET_REACH * n), step))
+        if best > 0:
+            _, best, _ = onset_profile(series, fewer, at, [0, *fine_samples(best, n)])
+        fewer = replace(fewer, onset=float(series.time[best] - series.time[0]))
+        out.append(Candidate(what, fewer, [at(best, x) for x in zetas], new))
     return out
 
 
@@ -991,24 +1051,27 @@ def settle_decays(
 ) -> OrderFit | None:
     """Each mode and line whose band decays over the record read as a free decay (`decay_readings`),
     fitted with only the decay, the level, the white noise and the modes near it free, and refitted
-    in full when it may win (within 0.5 ln n of the BIC); the best reading is taken when it raises
-    ln L by DECIDED (ln 19) or more (the same parameters and frequency: no look-elsewhere term; a
-    ring and a steady or noise-driven oscillation are both read at 19 : 1 before either is
-    claimed), else None. Each reading is a row of the criterion table."""
+    in full when it may win (within 0.5 ln n of the BIC), its onset then set again where the
+    likelihood at the fit is highest (`set_onset`, refitted when it moves); the best
+    reading is taken when it raises ln L by DECIDED (ln 19) or more (the same parameters and
+    frequency: no look-elsewhere term; a ring and a steady or noise-driven oscillation are both
+    read at 19 : 1 before either is claimed), plus 0.5 ln n (a parameter's BIC price) when its
+    onset is fitted inside the record, else None. Each reading is a row of the criterion table."""
     slack = 0.5 * math.log(current.n)
     readings = []
     for c in decay_readings(current, series, search):
         alt = partial_fit(series, current, c)
         full = alt.bic < current.bic + slack
-        if full:
-            alt = fit_order(series, c.spec, [alt.values], windows=current.windows)
+        if full:  # refitted, its onset set again at the fit's values
+            alt = set_onset(series, fit_order(series, c.spec, [alt.values], windows=current.windows))
         readings.append((c, alt, full))
         rows.append(_row(step, c.what, alt, current.bic, "full" if full else "partial", False))
     if not readings:
         return None
-    i = min(range(len(readings)), key=lambda i: readings[i][1].bic)
+    price = lambda a: DECIDED + (slack if a.spec.onset else 0.0)
+    i = max(range(len(readings)), key=lambda i: readings[i][1].log_likelihood - price(readings[i][1]))
     c, best, full = readings[i]
-    if not (full and best.log_likelihood >= current.log_likelihood + DECIDED):
+    if not (full and best.log_likelihood >= current.log_likelihood + price(best)):
         return None
     rows[i - len(readings)]["kept"] = True
     logger.info("model order: %s, BIC %.1f -> %.1f", c.what, current.bic, best.bic)
@@ -1176,8 +1239,9 @@ def choose_order(
     searched); None searches all. Returns the chosen fit and the criterion table."""
     t0 = time.perf_counter()
     fixed = dict((table or {}).get("modal") or {})
-    spec = ModalSpec.from_table({"modal": {k: fixed[k] for k in (*SEARCHED, "white") if k in fixed}})
+    spec = ModalSpec.from_table({"modal": {k: fixed[k] for k in (*SEARCHED, "white", "decays", "onset") if k in fixed}})
     search = {k: k not in fixed for k in SEARCHED}
+    search["decays"] = "decays" not in fixed  # read from the modes and lines (`settle_decays`)
     search["white"] = search["noise"] and "white" not in fixed
     current = fit_fixed(series, spec)
     if search["gain"] and current.model.spectral is not None:
@@ -1259,9 +1323,20 @@ def fit_fixed(series: Series, spec: ModalSpec) -> OrderFit:
     (`built_up`). With the counts given by the user the search adds nothing, and the spectral
     starts alone missed a weak line next to a resonance: with AR(1) noise the bench's weak_drive
     case put the line on the resonance's peak (or at 25-47 Hz) and the damping ratio 3x too high,
-    14 below the true reading in ln L."""
+    14 below the true reading in ln L. Decays without an onset get the likeliest (`set_onset`)."""
     model = ModalModel({"modal": spec.table()}, series)
     direct = fit_order(series, spec, model.guesses(model.default_priors()))
+    if spec.decays and spec.onset is None:  # the data's onset, and the likeliest at the spectral starts
+        guess = model.guesses(model.default_priors())[0]
+        n, step = model.t.size, max(1, int(ONSET_STEP * model.t.size))
+        _, best, _ = onset_profile(series, spec, lambda i: guess, range(0, int(ONSET_REACH * n), step))
+        if best > 0:
+            _, best, _ = onset_profile(series, spec, lambda i: guess, [0, *fine_samples(best, n)])
+        if best != model.onset:
+            moved = replace(spec, onset=float(series.time[best] - series.time[0]))
+            other = fit_order(series, moved, [guess])
+            direct = other if other.log_likelihood > direct.log_likelihood else direct
+        direct = set_onset(series, direct)
     if not (spec.modes and spec.lines):  # one kind only: no line to hide next to a resonance
         return direct
     built = built_up(series, spec)

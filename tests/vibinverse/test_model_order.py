@@ -816,3 +816,24 @@ def test_a_free_decay_is_detected_and_named_in_the_fit_and_its_verdict():
     diag = result.summary()["diagnostics"]
     assert diag["decay_0_detected"] is True
     assert "free decay 0 detected at 12.3" in verdict(result.summary()).headline
+
+
+def test_a_weak_blow_the_variance_does_not_show_gets_its_onset_from_the_likelihood():
+    """Regression (fixed seed): a ring of 29.6 Hz, zeta 0.012, amplitude 1 from 1.0 s in white
+    noise 0.3 raises the record's variance too little for `excitation_onset` (it reads the start);
+    a fixed order with one decay gets the likeliest onset (`set_onset`), and the search finds it."""
+    from vibinverse.terms.decay import excitation_onset
+
+    rng = np.random.default_rng(2)
+    t = np.arange(800) / 200.0
+    w, u = 2 * np.pi * 29.6, np.clip(t - 1.0, 0.0, None)
+    y = 2.0 + np.where(t >= 1.0, np.exp(-0.012 * w * u) * np.cos(w * u + 0.4), 0.0) + 0.3 * rng.normal(size=t.size)
+    assert excitation_onset(t, y) == 0
+    fixed = {"modes": 0, "lines": 0, "decays": 1, "drift": False, "noise": "white", "gain": False}
+    result = vi.fit(vi.series(t, y), {"modal": fixed}, method="map")
+    assert result.summary()["diagnostics"]["decay_0_detected"] is True
+    comp = next(c for c in result.data["components"] if c["kind"] == "decay")
+    assert comp["onset"] == pytest.approx(1.0, abs=0.011) and comp["frequency"] == pytest.approx(29.6, abs=0.05)
+    searched = choose_order(vi.series(t, y))
+    (decay,) = [c for c in searched.components if c["kind"] == "decay"]
+    assert decay["onset"] == pytest.approx(1.0, abs=0.011)

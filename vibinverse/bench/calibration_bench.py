@@ -189,6 +189,13 @@ CALIBRATION_CASES: dict[str, CalibrationCase] = {
             modes=None,
             decay=DecayRanges(),
         ),
+        CalibrationCase(
+            "hammer_blow",
+            "a blow at a quarter of a 4 s record at 200 Hz: the same ring, nothing before it, white noise 0.3",
+            Case("hammer_blow", "", fs=200.0, duration=4.0, modes=(), lines=(), sigma=0.3),
+            modes=None,
+            decay=DecayRanges(onset=0.25),
+        ),
     )
 }
 

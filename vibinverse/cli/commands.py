@@ -355,15 +355,16 @@ def cmd_fit(args: argparse.Namespace) -> dict[str, Any]:
     return _result(summary, written)
 
 
-MODAL_OPTIONS = ("modes", "lines", "drift", "noise", "gain")
+MODAL_OPTIONS = ("modes", "lines", "decays", "drift", "noise", "gain")
 
 
 def _fit_table(args: argparse.Namespace) -> dict[str, Any]:
     """The scene table of a fit: the scene file, or without one the generic modal model, whose
-    order `--modes`, `--lines`, `--drift`, `--noise` and `--gain` fix (the rest is chosen by BIC)."""
+    order `--modes`, `--lines`, `--decays`, `--drift`, `--noise` and `--gain` fix (the rest is chosen
+    by BIC)."""
     given = {k: getattr(args, k) for k in MODAL_OPTIONS if getattr(args, k) is not None}
     if args.scene is not None:
-        for k in ("modes", "lines"):
+        for k in ("modes", "lines", "decays"):
             if k in given:
                 raise InputError(
                     f"--{k}: fixes the order of the scene-less modal model; with --scene the scene describes "
@@ -379,7 +380,7 @@ def _fit_table(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError(
             "--set: overrides a scene value; give --scene, or fix the modal model by --modes, --lines, ..."
         )
-    for k in ("modes", "lines"):
+    for k in ("modes", "lines", "decays"):
         if k in given and not 0 <= given[k] <= 6:
             raise InputError(f"--{k}: {given[k]} is outside the allowed range [0, 6]")
     if "drift" in given:
@@ -790,6 +791,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fit.add_argument(
         "--lines", type=ranges.integer(0, 6), metavar="L", help="without --scene: fix the number of lines (0-6)"
+    )
+    fit.add_argument(
+        "--decays",
+        type=ranges.integer(0, 6),
+        metavar="D",
+        help="without --scene: fix the number of free decays (0-6: rings from one excitation, a pluck or a blow; "
+        "their onset the likeliest)",
     )
     fit.add_argument(
         "--drift",

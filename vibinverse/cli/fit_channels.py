@@ -28,7 +28,7 @@ CHANNEL_OPTIONS = ("channels", "inputs", "geometry", "quantity")
 #: the --method values a multi-channel fit accepts: its one estimator (Bayesian FFT + Laplace)
 OMA_METHODS = frozenset({"auto", "spectral"})
 #: options of the single-series fit that a multi-channel fit refuses (scene, model order, sampler)
-SERIES_ONLY = ("scene", "lines", "drift", "noise", "gain", "set", "free", "chain", "resume", "summary")
+SERIES_ONLY = ("scene", "lines", "decays", "drift", "noise", "gain", "set", "free", "chain", "resume", "summary")
 
 
 def add_channel_options(parser: argparse.ArgumentParser) -> None:

@@ -9,8 +9,9 @@ and nuisance terms, all in one Kalman filter (`ModalModel`, registered as "modal
 - lines: L deterministic sinusoids (`lines[j].frequency`, `.amplitude`, `.phase`): the mean.
 - free decays: D rings from one excitation (`decays[j].frequency`, `.damping_ratio`,
   `.amplitude`; `vibinverse.terms.decay.FreeDecay`): the oscillator without process noise, its
-  state drawn N(0, A^2 diag(1, w^2)) at the onset (`excitation_onset`: the first sample, or a
-  blow's, whose step gets a table entry of its own), zero before. The filter's engine only (a
+  state drawn N(0, A^2 diag(1, w^2)) at the onset (`modal.onset` in seconds, else
+  `excitation_onset`: the first sample, or a blow's; its step gets a table entry of its own),
+  zero before; all decays share it (one excitation). The filter's engine only (a
   ring is not stationary: no Whittle); scaled by the gain drift like the modes.
 - d: drift (`drift.rate`, the RMS change per sqrt(second)): a random walk started at 0 (so that
   `level` is the series' level at the first sample), or an integrated random walk (drift
@@ -147,6 +148,9 @@ class ModalSpec(NuisanceKinds):
     gain: int = 0
     white: bool = True
     decays: int = 0
+    #: the free decays' onset, seconds after the first stamp (None: read from the data,
+    #: `excitation_onset`); the order search sets it where the likelihood is highest
+    onset: float | None = None
 
     def __post_init__(self) -> None:
         if not self.white and not self.coloured:
@@ -164,11 +168,12 @@ class ModalSpec(NuisanceKinds):
             m = {}
         if not isinstance(m, dict):
             raise SceneError("modal: must be a table, e.g. {modes = 2, lines = 0, drift = true, noise = 'ar1'}")
-        unknown = set(m) - {"modes", "lines", "decays", "drift", "noise", "gain", "white", "values", "start", "windows"}
+        keys = {"modes", "lines", "decays", "onset", "drift", "noise", "gain", "white", "values", "start", "windows"}
+        unknown = set(m) - keys
         if unknown:
             raise SceneError(
-                f"modal.{sorted(unknown)[0]}: unknown key; allowed: modes, lines, decays, drift, noise, gain, white, "
-                "values, start, windows"
+                f"modal.{sorted(unknown)[0]}: unknown key; allowed: modes, lines, decays, onset, drift, noise, gain, "
+                "white, values, start, windows"
             )
         out = {}
         for key in ("modes", "lines", "decays"):
@@ -196,7 +201,12 @@ class ModalSpec(NuisanceKinds):
         white = m.get("white", True)
         if not isinstance(white, (bool, np.bool_)):
             raise SceneError(f"modal.white: {white!r}; allowed: true, or false beside noise = 'ar1' or '1/f'")
-        return cls(out["modes"], out["lines"], drift, noise, int(gain), bool(white), out["decays"])
+        onset = m.get("onset")
+        number = isinstance(onset, (int, float, np.number)) and not isinstance(onset, bool)
+        if onset is not None and not (number and 0 <= float(onset) < math.inf):
+            raise SceneError(f"modal.onset: {onset!r}; allowed: seconds >= 0 after the first sample (decays' onset)")
+        onset = None if onset is None else float(onset)
+        return cls(out["modes"], out["lines"], drift, noise, int(gain), bool(white), out["decays"], onset)
 
     def table(self) -> dict[str, Any]:
         """The `modal` sub-table of this order."""
@@ -208,6 +218,7 @@ class ModalSpec(NuisanceKinds):
             "gain": self.gain,
             "white": self.white,
             **({"decays": self.decays} if self.decays else {}),
+            **({"onset": self.onset} if self.decays and self.onset is not None else {}),
         }
 
     def names(self) -> list[str]:
@@ -558,7 +569,7 @@ class ModalModel(SignalModel):
         # table entry of its own (the decays' fresh state is that step's process noise)
         self.onset, self.event = 0, None
         if self.spec.decays:
-            self.onset = excitation_onset(self.t, self.y)
+            self.onset = self.onset_sample(self.spec.onset)
             if self.onset > 0:
                 self.steps = np.append(self.steps, self.steps[self.idx[self.onset]])
                 self.idx = self.idx.copy()
@@ -605,6 +616,14 @@ class ModalModel(SignalModel):
         self._density: tuple[bytes, tuple[tuple[np.ndarray, float], float, float]] | None = None
         self._level_window: int | None = None
         self._leading: tuple[int, float] | None = None
+
+    def onset_sample(self, onset: float | None) -> int:
+        """The sample of a free decay's onset `onset` (s after the first stamp: the first at or after
+        it, within rounding), or, for None, the data's (`excitation_onset`)."""
+        if onset is None:
+            return excitation_onset(self.t, self.y)
+        k = int(np.searchsorted(self.t - self.t[0], onset - 1e-9 * self.dt))
+        return min(k, self.t.size - 1)
 
     def data_facts(self) -> DataFacts:
         """What the terms read of the data (`DataFacts`): the whole record's sd, span and step (a

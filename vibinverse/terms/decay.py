@@ -11,9 +11,11 @@ the ring's amplitude and phase), so only f, zeta and A are fitted: as many param
 noise-driven resonance or a line, which it differs from by its envelope (decaying from the onset,
 not stationary; nothing before it).
 
-The onset is the record's first sample unless the record holds a blow (`excitation_onset`): a rise
-of the record's variance by ONSET_RISE or more at its most likely change point. It is read from
-the data, not fitted (a blow's arrival is sharp; its time is not a parameter of the ring).
+The onset is a sample of the record, held (a blow's arrival is sharp: its time is not a parameter
+the intervals carry). The modal model takes it from its table (`modal.onset`, which the order
+search sets where the likelihood is highest: `vibinverse.model_order.set_onset`), else from the
+data (`excitation_onset`: a rise of the record's variance by ONSET_RISE or more at its most likely
+change point, else the first sample).
 
 Its one-sided PSD (`psd`, for Whittle's Fisher information only: a decay is not stationary) is the
 record's average: the oscillator's Lorentzian shape carrying the ring's energy over the span,

@@ -529,3 +529,20 @@ def test_an_unknown_method_is_refused_before_the_order_search(tmp_path):
     assert "--method: 'bogus' is not one of" in r.stderr and "importance" in r.stderr
     assert "model order" not in r.stderr + r.stdout  # no search ran
     assert not out.exists()
+
+
+def test_fit_decays_fixes_the_free_decays_and_refuses_a_count_out_of_range(tmp_path, capsys):
+    t = np.arange(800) / 200.0
+    u = np.clip(t - 1.0, 0.0, None)
+    ring = np.where(t >= 1.0, np.exp(-0.01 * 2 * np.pi * 15.0 * u) * np.sin(2 * np.pi * 15.0 * u), 0.0)
+    y = 1.0 + ring + 0.05 * np.random.default_rng(4).normal(size=t.size)
+    data = tmp_path / "blow.csv"
+    np.savetxt(data, np.c_[t, y], delimiter=",", header="time,intensity", comments="")
+    order = ("--modes", "0", "--lines", "0", "--drift", "none", "--noise", "white", "--gain", "none")
+    fixed, _ = cli_json(capsys, "fit", str(data), "--method", "map", "--decays", "1", *order, "-o", str(tmp_path / "f"))
+    f = fixed["parameters"]["decays[0].frequency"]
+    assert f["units"] == "Hz" and f["q05"] < 15.0 < f["q95"]
+    assert fixed["diagnostics"]["decay_0_detected"] is True
+    bad = run_cli("fit", str(data), "--decays", "7", "-o", str(tmp_path / "bad"))
+    assert bad.returncode == 2 and "--decays" in bad.stderr and "[0, 6]" in bad.stderr
+    assert "Traceback" not in bad.stderr and not (tmp_path / "bad").exists()
