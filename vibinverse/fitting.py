@@ -260,9 +260,15 @@ def fit_series(
             if order.capped:  # the record holds more modes or lines than the search may add
                 result.diagnostics["order_capped"] = order.capped
             held = {n: v for n, v in order.held.items() if n not in post.space.names}
-            if held:  # values the fit's likelihood cannot measure: the filter's maximum, no interval
+            if held:  # values held where the search set them, no interval (`OrderResult.held`)
                 result.diagnostics["held"] = {
-                    n: {"value": v, "why": "set by the Kalman filter's likelihood; Whittle's cannot measure it"}
+                    n: {
+                        "value": v,
+                        "why": "a free decay's initial amplitude scale (one ring is one draw of it), held at its "
+                        "maximum likelihood"
+                        if n.startswith("decays[")
+                        else "set by the Kalman filter's likelihood; Whittle's cannot measure it",
+                    }
                     for n, v in held.items()
                 }
     elif order is not None:  # a scene's nuisance terms, chosen by the data

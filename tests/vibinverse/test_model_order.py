@@ -816,6 +816,8 @@ def test_a_free_decay_is_detected_and_named_in_the_fit_and_its_verdict():
     diag = result.summary()["diagnostics"]
     assert diag["decay_0_detected"] is True
     assert "free decay 0 detected at 12.3" in verdict(result.summary()).headline
+    # its amplitude (the prior scale of one ring's initial state) is held where the search set it
+    assert "decays[0].amplitude" in diag["held"] and "decays[0].amplitude" not in result.summary()["parameters"]
 
 
 def test_a_weak_blow_the_variance_does_not_show_gets_its_onset_from_the_likelihood():
