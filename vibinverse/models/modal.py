@@ -1297,8 +1297,7 @@ class ModalModel(SignalModel):
 
     def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
         """Each line (its amplitude to 0), each mode (its rms to 0) and each free decay (its amplitude
-        to 0), with the parameters near it
-        (`near_parameters`)."""
+        to 0), with the parameters near it (`near_parameters`)."""
         out = []
         for j in range(self.spec.lines):
             f = f"lines[{j}].frequency"
@@ -1307,29 +1306,15 @@ class ModalModel(SignalModel):
             out.append(
                 LineTest(f"line_{j}", {f"lines[{j}].amplitude": 0.0}, f if f in free else None, True, near, hz=hz)
             )
-        for i in range(self.spec.modes):
-            f = f"modes[{i}].frequency"
-            near = self.near_parameters(values, f"modes[{i}]")
-            damping, hz = self.value(values, f"modes[{i}].damping_ratio"), self.value(values, f)
-            out.append(
-                LineTest(
-                    f"mode_{i}", {f"modes[{i}].rms": 0.0}, f if f in free else None, near=near, damping=damping, hz=hz
-                )
-            )
-        for j in range(self.spec.decays):
-            f = f"decays[{j}].frequency"
-            near = self.near_parameters(values, f"decays[{j}]")
-            damping, hz = self.value(values, f"decays[{j}].damping_ratio"), self.value(values, f)
-            out.append(
-                LineTest(
-                    f"decay_{j}",
-                    {f"decays[{j}].amplitude": 0.0},
-                    f if f in free else None,
-                    near=near,
-                    damping=damping,
-                    hz=hz,
-                )
-            )
+        rings = (("modes", "mode", "rms", self.spec.modes), ("decays", "decay", "amplitude", self.spec.decays))
+        for kind, label, scale, count in rings:
+            for i in range(count):
+                c = f"{kind}[{i}]"
+                f = f"{c}.frequency"
+                damping, hz = self.value(values, f"{c}.damping_ratio"), self.value(values, f)
+                near = self.near_parameters(values, c)
+                null = {f"{c}.{scale}": 0.0}
+                out.append(LineTest(f"{label}_{i}", null, f if f in free else None, near=near, damping=damping, hz=hz))
         return out
 
     def near_parameters(self, values: dict[str, float], component: str) -> tuple[str, ...]:

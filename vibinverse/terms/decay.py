@@ -33,7 +33,8 @@ import numpy as np
 from vibinverse.io.series import MIN_CYCLES
 from vibinverse.kalman import oscillator_fill
 from vibinverse.priors import Prior
-from vibinverse.terms.base import FREE_DECAY_FORM, DataFacts, Term, register_term
+from vibinverse.terms.base import FREE_DECAY_FORM, DataFacts, register_term
+from vibinverse.terms.resonance import Oscillator
 
 #: a blow: the record's variance, split at its most likely change point, rises at least this
 #: many times (the RMS 1.22 times) from before to after ...
@@ -113,37 +114,25 @@ def envelope_decay(y: np.ndarray, dt: float, f: float, half_width: float) -> flo
 
 
 @register_term
-class FreeDecay(Term):
+class FreeDecay(Oscillator):
     """A ring-down from an onset: `<prefix>.frequency` (Hz), `.damping_ratio`, `.amplitude`
-    (intensity). `event`: the entry of the step tables whose step ends at the onset (its process
-    noise carries the fresh state); None: the onset is the first sample (the initial covariance
-    carries it)."""
+    (intensity; the oscillator's third parameter, the scale of its state). `event`: the entry of
+    the step tables whose step ends at the onset (its process noise carries the fresh state); None:
+    the onset is the first sample (the initial covariance carries it)."""
 
     kind = "free_decay"
     label = "free decay"
-    scaled = True
     block_form = FREE_DECAY_FORM
 
     def __init__(self, prefix: str = "decays[0]", event: int | None = None, ring: float | None = None):
         """`ring`: the seconds from the onset to the record's end (default: the whole span)."""
-        self.prefix = prefix
+        super().__init__(prefix)
         self.event = event
         self.ring = ring
 
     def names(self) -> list[str]:
         p = self.prefix
         return [f"{p}.frequency", f"{p}.damping_ratio", f"{p}.amplitude"]
-
-    def blocks(self, facts: DataFacts) -> list[int]:
-        return [2]
-
-    def _wa(self, values: Mapping[str, float]) -> tuple[float, float, float]:
-        f, zeta, amp = (float(values[n]) for n in self.names())
-        w = 2.0 * math.pi * f
-        return w, zeta * w, amp
-
-    def form_parameters(self, values: Mapping[str, float], facts: DataFacts) -> list[tuple[float, ...]]:
-        return [self._wa(values)]
 
     def excite(self, values: Mapping[str, float], qs: np.ndarray, p0: np.ndarray, offset: int) -> None:
         """Write the fresh state's covariance A^2 diag(1, w^2) at the onset: into P0 (onset at the
@@ -173,14 +162,6 @@ class FreeDecay(Term):
         big_w = 2.0 * math.pi * np.asarray(f, dtype=float)
         shape = 4.0 * a * w * w / ((w * w - big_w * big_w) ** 2 + (2.0 * a * big_w) ** 2)  # unit integral
         return 2.0 * mean_square * shape
-
-    def slowest_period(self, values: Mapping[str, float]) -> float | None:
-        f = float(values[self.names()[0]])
-        return 1.0 / f if f > 0 else math.inf
-
-    def valid(self, values: Mapping[str, float]) -> bool:
-        f, zeta, amp = (float(values[n]) for n in self.names())
-        return all(math.isfinite(v) for v in (f, zeta, amp)) and f > 0.0 and zeta > 0.0 and amp >= 0.0
 
     def priors(self, facts: DataFacts) -> dict[str, Prior]:
         f, zeta, amp = self.names()
