@@ -67,7 +67,12 @@ A tone must also be its own (`products`): a line, or a resonance as narrow as on
 bandwidth 2 zeta f under TONE_BINS Fourier bins), whose frequency is within one Fourier bin (1/T) of
 an integer combination sum k_i f_i (sum |k_i| from 2 to PRODUCT_ORDER = 5) of stronger detected
 tones (larger gain) is their harmonic or intermodulation product, which a nonlinearity anywhere in
-the chain (a shaker, a sensor, the pixel's own intensity law) makes. An intermodulation product
+the chain (a shaker, a sensor, the pixel's own intensity law) makes; a free decay only when its
+half-power half-width is the combination's too (sum |k_i| zeta_i f_i, within 1/T plus WIDTH_SLACK,
+25 %, of the larger: a product of rings decays at the sum of their rates, and a ring's rate is
+measured, where a steady tone's fitted bandwidth under a bin is not; a plucked string's fifth partial,
+551.36 Hz with zeta 0.001, is within a bin of 2 x 440.70 - 3 x 110.01 Hz, but a product there would
+be 2.2 times as broad). An intermodulation product
 (two or more distinct tones combined) stays in the model, is named (`{label}_product`, e.g.
 "2 x 100 + 120 Hz") and is not claimed. A harmonic (k x f of one tone) is named
 (`{label}_harmonic`) but still claimed: a string's or a beam's higher modes sit at near-integer
@@ -115,6 +120,8 @@ TONE_BINS = 4.0
 PRODUCT_ORDER = 5
 #: products are read only where a random frequency would match a combination this rarely
 PRODUCT_CHANCE = 0.05
+#: a product's half-width is its combination's within a bin plus this fraction (`same_width`)
+WIDTH_SLACK = 0.25
 
 
 def threshold(posterior: Posterior, frequency: str | None) -> float:
@@ -262,6 +269,17 @@ def combinations(bases: list[float], order: int) -> dict[float, tuple[int, ...]]
     return out
 
 
+def half_width(test: LineTest) -> float:
+    """A tested component's half-power half-width zeta f (Hz; 0 for a line): its decay rate / 2 pi."""
+    return float(test.damping or 0.0) * float(test.hz or 0.0)
+
+
+def same_width(a: float, b: float, tol: float) -> bool:
+    """Whether two half-widths (Hz) agree: within a Fourier bin `tol` (a width under a bin is not
+    resolved) plus WIDTH_SLACK of the larger (the fitted widths' own error)."""
+    return abs(a - b) <= tol + WIDTH_SLACK * max(a, b)
+
+
 def tone(test: LineTest, span: float) -> bool:
     """Whether a tested component is a tone: a line, or a resonance narrower than TONE_BINS bins."""
     if test.hz is None:
@@ -281,7 +299,9 @@ class Product:
 def products(tests: list[LineTest], gains: dict[str, float], span: float, nyquist: float) -> dict[str, Product]:
     """{label: Product} of each tone among `tests` (the detected ones) that lies within
     1/span of a combination (`combinations`) of the stronger tones that are not products
-    themselves, taken strongest first by `gains`, where a random frequency in (0, nyquist) would
+    themselves, and, for a free decay, whose half-width is the combination's (sum |k_i| zeta_i f_i,
+    `same_width`),
+    taken strongest first by `gains`, where a random frequency in (0, nyquist) would
     match one of those combinations with a chance of at most PRODUCT_CHANCE (module docstring)."""
     tol = 1.0 / span
     bases: list[LineTest] = []
@@ -290,7 +310,13 @@ def products(tests: list[LineTest], gains: dict[str, float], span: float, nyquis
         hz = float(test.hz or 0.0)  # a tone has a frequency
         freqs = [float(b.hz or 0.0) for b in bases]
         combos = {f: k for f, k in combinations(freqs, PRODUCT_ORDER).items() if f < nyquist}
-        near = [(sum(abs(k) for k in ks), abs(f - hz), ks) for f, ks in combos.items() if abs(f - hz) <= tol]
+        widths = [half_width(b) for b in bases]
+        near = [
+            (sum(abs(k) for k in ks), abs(f - hz), ks)
+            for f, ks in combos.items()
+            if abs(f - hz) <= tol
+            and (not test.ring or same_width(half_width(test), sum(abs(k) * w for k, w in zip(ks, widths)), tol))
+        ]
         if near and len(combos) * 2.0 * tol / nyquist <= PRODUCT_CHANCE:
             _, _, ks = min(near)
             out[test.label] = Product(combination_text(ks, freqs), sum(k != 0 for k in ks) > 1)

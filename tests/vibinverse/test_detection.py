@@ -357,3 +357,21 @@ def test_a_weak_intermodulation_line_is_fitted_named_and_not_claimed():
     assert all(diag[f"line_{j}_detected"] for j in range(3)) and not any(k.endswith("_product") for k in diag)
     assert re.fullmatch(r"3 x 7\.?\d* Hz", diag[f"line_{third}_harmonic"])
     assert "a harmonic of a stronger tone, or a mode of its own" in verdict(summary).headline
+
+
+def test_a_ring_is_a_product_only_when_it_decays_as_fast_as_the_combination():
+    """A plucked string's partials (free decays, 3 s): the fifth, 551.358 Hz, lies within a bin of
+    2 x 440.698 - 3 x 110.011 Hz, but rings at its own rate (zeta 0.001, half-width 0.55 Hz) where
+    the product would ring at the sum of theirs (1.21 Hz): not a product."""
+    from vibinverse.detection import products
+    from vibinverse.models.base import LineTest
+
+    rings = [(110.011, 0.00096, 500.0), (220.090, 0.00097, 300.0), (330.301, 0.00097, 200.0), (440.698, 0.00101, 150.0)]
+    tests = [LineTest(f"decay_{j}", {}, None, damping=z, hz=f, ring=True) for j, (f, z, _) in enumerate(rings)]
+    gains = {f"decay_{j}": g for j, (_, _, g) in enumerate(rings)}
+    fifth = LineTest("decay_4", {}, None, damping=0.001, hz=551.358, ring=True)
+    out = products([*tests, fifth], {**gains, "decay_4": 100.0}, 3.0, 2000.0)
+    assert "decay_4" not in out and out["decay_1"].text == "2 x 110.011 Hz"  # harmonics are still named
+    # rings half as damped, whose combination is as narrow as the fifth: then it is their product
+    slow = [LineTest(t.label, {}, None, damping=0.5 * t.damping, hz=t.hz, ring=True) for t in tests]
+    assert products([*slow, fifth], {**gains, "decay_4": 100.0}, 3.0, 2000.0)["decay_4"].mixed

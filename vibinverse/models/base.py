@@ -37,7 +37,7 @@ class LineTest:
     `damping` a resonance's damping ratio at the tested point (a hump too broad is not claimed as
     one: `vibinverse.detection.BROAD_DAMPING`), None for a line; `hz` the component's frequency
     there, when the model knows it (a tone at an integer combination of stronger ones is their
-    product, not claimed: `vibinverse.detection.products`)."""
+    product, not claimed: `vibinverse.detection.products`); `ring` marks a free decay."""
 
     label: str
     null: dict[str, float]
@@ -46,6 +46,9 @@ class LineTest:
     near: tuple[str, ...] | None = None
     damping: float | None = None
     hz: float | None = None
+    #: a free decay: its damping is a measured decay rate (a product of rings decays at the sum of
+    #: theirs: `vibinverse.detection.products`), not a stationary resonance's bandwidth
+    ring: bool = False
 
 
 class SignalModel(ABC):

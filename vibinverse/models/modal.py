@@ -1314,7 +1314,11 @@ class ModalModel(SignalModel):
                 damping, hz = self.value(values, f"{c}.damping_ratio"), self.value(values, f)
                 near = self.near_parameters(values, c)
                 null = {f"{c}.{scale}": 0.0}
-                out.append(LineTest(f"{label}_{i}", null, f if f in free else None, near=near, damping=damping, hz=hz))
+                ring = kind == "decays"
+                test = LineTest(
+                    f"{label}_{i}", null, f if f in free else None, near=near, damping=damping, hz=hz, ring=ring
+                )
+                out.append(test)
         return out
 
     def near_parameters(self, values: dict[str, float], component: str) -> tuple[str, ...]:
