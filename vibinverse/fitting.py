@@ -261,16 +261,8 @@ def fit_series(
                 result.diagnostics["order_capped"] = order.capped
             held = {n: v for n, v in order.held.items() if n not in post.space.names}
             if held:  # values held where the search set them, no interval (`OrderResult.held`)
-                result.diagnostics["held"] = {
-                    n: {
-                        "value": v,
-                        "why": "a free decay's initial amplitude scale (one ring is one draw of it), held at its "
-                        "maximum likelihood"
-                        if n.startswith("decays[")
-                        else "set by the Kalman filter's likelihood; Whittle's cannot measure it",
-                    }
-                    for n, v in held.items()
-                }
+                why = order.held_why
+                result.diagnostics["held"] = {n: {"value": v, "why": why[n][1]} for n, v in held.items()}
     elif order is not None:  # a scene's nuisance terms, chosen by the data
         result.diagnostics["nuisance_search"] = order.criterion
         result.timing["nuisance_search_s"] = order.seconds

@@ -283,10 +283,17 @@ class OrderResult:
         the rest, a plucked string's five (12,000 samples) left the importance sampler 130
         effective draws of 2,000 and sent the fit to emcee. Held at the search's maximum (empirical
         Bayes), the frequencies' and damping ratios' intervals are the data's given the ring."""
+        return {n: v for n, (v, _) in self.held_why.items()}
+
+    @property
+    def held_why(self) -> dict[str, tuple[float, str]]:
+        """`held` with why each is held: {name: (value, why)}."""
         spec, values = self.fit.spec, self.fit.values
-        out = {f"decays[{j}].amplitude": float(values[f"decays[{j}].amplitude"]) for j in range(spec.decays)}
+        ring = "a free decay's initial amplitude scale (one ring is one draw of it), held at its maximum likelihood"
+        out = {f"decays[{j}].amplitude": (float(values[f"decays[{j}].amplitude"]), ring) for j in range(spec.decays)}
         if self.fit.model.spectral is not None:
-            out |= {n: float(values[n]) for n in spec.drift_names if n in values}
+            whittle = "set by the Kalman filter's likelihood; Whittle's cannot measure it"
+            out |= {n: (float(values[n]), whittle) for n in spec.drift_names if n in values}
         return out
 
     def table(self) -> dict[str, Any]:

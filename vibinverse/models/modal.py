@@ -1306,15 +1306,18 @@ class ModalModel(SignalModel):
             out.append(
                 LineTest(f"line_{j}", {f"lines[{j}].amplitude": 0.0}, f if f in free else None, True, near, hz=hz)
             )
-        rings = (("modes", "mode", "rms", self.spec.modes), ("decays", "decay", "amplitude", self.spec.decays))
-        for kind, label, scale, count in rings:
+        # (kind, test label, the scale its null sets to 0, count, a free decay's measured decay rate)
+        rings = (
+            ("modes", "mode", "rms", self.spec.modes, False),
+            ("decays", "decay", "amplitude", self.spec.decays, True),
+        )
+        for kind, label, scale, count, ring in rings:
             for i in range(count):
                 c = f"{kind}[{i}]"
                 f = f"{c}.frequency"
                 damping, hz = self.value(values, f"{c}.damping_ratio"), self.value(values, f)
                 near = self.near_parameters(values, c)
                 null = {f"{c}.{scale}": 0.0}
-                ring = kind == "decays"
                 test = LineTest(
                     f"{label}_{i}", null, f if f in free else None, near=near, damping=damping, hz=hz, ring=ring
                 )
