@@ -11,8 +11,26 @@ import numpy as np
 
 from vibinverse.io.series import Series
 
+#: the zero padding of `periodogram` (its frequencies k / (PAD x span))
+PAD = 4
+#: the running median that makes a periodogram's local background spans this many Fourier bins
+#: (1 / span each): wide against a line (one bin) and a light resonance, narrow against the slope
+#: of coloured noise
+BACKGROUND_BINS = 32
 
-def periodogram(series: Series, pad: int = 4) -> tuple[np.ndarray, np.ndarray]:
+
+def local_background(power: np.ndarray, width: int) -> np.ndarray:
+    """The running median of `power` over `width` ordinates, divided by ln 2: the mean of an
+    exponential ordinate whose median it is. At the ends the ordinates are mirrored (a sampled
+    spectrum is even about 0 and about Nyquist): repeating the end value instead made a small last
+    ordinate the median of half a window and Nyquist a candidate."""
+    from scipy.ndimage import median_filter
+
+    width = max(3, min(int(width), power.size) | 1)
+    return np.maximum(median_filter(power, size=width, mode="mirror") / np.log(2.0), np.finfo(float).tiny)
+
+
+def periodogram(series: Series, pad: int = PAD) -> tuple[np.ndarray, np.ndarray]:
     """Power of the de-meaned series on (0, Nyquist]. Uniform sampling: FFT with `pad`-fold zero
     padding, gaps filled with the mean, |sum y e^{-i w t}|^2 / N. Irregular stamps (jitter, dropped
     frames): the floating-mean Lomb-Scargle periodogram of the valid samples (nifty-ls, a NUFFT:
@@ -149,7 +167,12 @@ def line_candidates(series: Series, band: tuple[float, float], n_candidates: int
 
     Each peak is taken from the periodogram of what the peaks before it leave (their sinusoids
     subtracted): a strong, lightly damped resonance's window sidelobes would otherwise hide a weak
-    line far from it."""
+    line far from it. A peak is the largest ratio of the power to its local background (the running
+    median over BACKGROUND_BINS Fourier bins, `local_background`), not the largest power: under
+    coloured noise (AR(1), 1/f, a drift) the raw periodogram's largest values are the noise's low
+    frequencies, and a drive standing 20 times over its neighbours at 10 Hz came after three of
+    them (the scene fit then started its drive there and stayed); over a flat floor the two
+    rankings agree."""
     t, y = series.time, series.intensity
     resid = y - np.nanmean(y)
     picked: list[float] = []
@@ -161,7 +184,8 @@ def line_candidates(series: Series, band: tuple[float, float], n_candidates: int
         if not sel.any():
             break
         idx = np.flatnonzero(sel)
-        f = _refine(freqs, power, int(idx[np.argmax(power[idx])]))
+        excess = power / local_background(power, PAD * BACKGROUND_BINS)
+        f = _refine(freqs, power, int(idx[np.argmax(excess[idx])]))
         picked.append(f)
         resid = resid - sinusoid(t, resid, f)[2]
     quarter = np.minimum((4 * (t - t[0]) / (t[-1] - t[0] + series.dt)).astype(int), 3)

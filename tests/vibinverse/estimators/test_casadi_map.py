@@ -19,17 +19,18 @@ from vibinverse.pipeline import AMBIGUITY_MARGIN
 @pytest.fixture(
     scope="module",
     params=[
-        pytest.param((("sampling.duration=4",), 2), id="4s"),
+        pytest.param((("sampling.duration=4",), 0), id="4s"),
         pytest.param(((), 1), id="20s", marks=pytest.mark.slow),
     ],
 )
 def readings(request):
-    """The sec. 4.2 posterior (4 s, 800 samples, seed 2, or the scene's 20 s, 4000 samples, seed 1:
+    """The sec. 4.2 posterior (4 s, 800 samples, seed 0, or the scene's 20 s, 4000 samples, seed 1:
     ~1 s to compile and 1-3 s a solve), the MAP from the spectral starts, and the start of the
     exchanged reading (tilt resonance and drive line swapped) as the pipeline forms it. IPOPT stalls
     on both (on 20 s it stalls for seeds 1 and 3-7, not 0 and 2, since the base force is held over
     each frame; the MAP from the spectral starts took 8.6 s for seed 1 but 144 s for seeds 3 and 4
-    on a slow machine, so the test uses seed 1)."""
+    on a slow machine, so the test uses seed 1; on 4 s, from the starts ranked by their excess over
+    the spectrum's background, seeds 0, 4-6 and 8 of 0-9 stall, seed 2 no longer does)."""
     overrides, seed = request.param
     problem = frame_problem(*overrides, seed=seed)
     best = casadi_map(problem, ranked_starts(problem))

@@ -122,3 +122,16 @@ def test_ar1_sensor_noise_is_fitted_beside_the_frame():
     assert tilt["q05"] <= truth <= tilt["q95"]
     assert p["ar.time"]["q05"] <= -0.005 / math.log(0.9) <= p["ar.time"]["q95"]
     assert result.summary()["data"]["model"]["terms"] == "AR(1) noise, white noise"
+
+
+def test_the_drive_start_under_ar1_noise_is_the_drive():
+    """AR(1) sensor noise (phi 0.9, sd 0.6) beside the sec. 4.2 roof, six data sets: every set's
+    spectral starts (`guesses`) hold one with the drive within 0.05 Hz of 10 Hz. Ranked by raw power
+    the candidates missed the drive in three of them (the tilt's 3.5 Hz and the noise's 0.3-1.8 Hz
+    instead), and the nuisance search's MAP kept a drive where it started."""
+    table = frame("noise.sigma=0")
+    analyst = frame("noise.sigma=0.6")
+    for seed in range(6):
+        model = build_model(analyst, _series(table, seed=seed, ar=(0.9, 0.6)))
+        drives = [g[K + "drive_frequency"] for g in model.guesses({})]
+        assert any(abs(f - 10.0) < 0.05 for f in drives), (seed, drives)
