@@ -504,9 +504,15 @@ def _bench_robustness_scene(args: argparse.Namespace, out: Path, js: Path) -> di
     "scene", so that an earlier run's modal columns stay; its table in robustness_scene.txt, and each
     data set's fits appended to robustness_scene_fits.jsonl as it finishes (a long run keeps them)."""
     from vibinverse.bench.robustness_bench import with_scene
-    from vibinverse.bench.robustness_scene import SCENE_CASES, run, table
+    from vibinverse.bench.robustness_scene import FITTERS, SCENE_CASES, run, table
 
     cases = _case_names(args, list(SCENE_CASES))
+    fitters = [f.strip() for f in args.fitters.split(",") if f.strip()] if args.fitters is not None else None
+    for f in fitters if fitters is not None else []:
+        if f not in FITTERS:
+            raise InputError(f"--fitters: {f!r}; allowed: {', '.join(FITTERS)}")
+    if fitters == []:
+        raise InputError(f"--fitters: none given; allowed: {', '.join(FITTERS)}")
     txt, fits = out / SCENE_TABLE, out / SCENE_FITS
     _check_outputs({js.name: js, txt.name: txt, fits.name: fits}, {})
     with created(out):
@@ -516,7 +522,7 @@ def _bench_robustness_scene(args: argparse.Namespace, out: Path, js: Path) -> di
                 previous = jsonio.loads(js.read_text())
         fits.write_text("")  # this run's records only
         workers = args.workers if args.workers is not None else min(2, os.cpu_count() or 1)
-        result = run(quick=args.quick, cases=cases, workers=workers, records=fits)
+        result = run(quick=args.quick, cases=cases, fitters=fitters, workers=workers, records=fits)
         text = table(result)
         logger.info(text)
         doc = with_scene(previous if isinstance(previous, dict) else None, result)
@@ -621,6 +627,8 @@ def cmd_bench(args: argparse.Namespace) -> dict[str, Any]:
         )
     if args.scene and mode != "robustness":
         raise InputError("--scene: the scene column of the robustness bench; give --robustness --scene")
+    if args.fitters is not None and not args.scene:
+        raise InputError("--fitters: only with --robustness --scene")
     stem, runner = BENCH_MODES[mode]
     out = output_dir(args.output)
     js, png = out / f"{stem}.json", out / f"{stem}.png"
@@ -968,6 +976,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--cases",
         metavar="A,B",
         help="with --robustness --scene, --realdata or --calibration: these cases only, in this order (default: all)",
+    )
+    bench.add_argument(
+        "--fitters",
+        metavar="A,B",
+        help="with --robustness --scene: these fitters only (ours-scene, ours-scene-white, ours; default: all three)",
     )
     bench.add_argument(
         "--workers",

@@ -257,8 +257,8 @@ def test_one_data_set_of_a_case_through_the_scorer(tmp_path):
 
 def test_bench_robustness_scene_merges_into_robustness_json(tmp_path, capsys, monkeypatch):
     """--robustness --scene keeps an earlier run's modal columns and puts its own under "scene"
-    (the run itself stands in: it takes minutes); --scene alone, unknown cases and --workers
-    without --scene are refused."""
+    (the run itself stands in: it takes minutes), --fitters chooses the fitters; --scene alone,
+    unknown cases or fitters and --workers or --fitters without --scene are refused."""
     from tests.conftest import run_cli
     from vibinverse.cli import main
 
@@ -276,11 +276,18 @@ def test_bench_robustness_scene_merges_into_robustness_json(tmp_path, capsys, mo
     doc = json.loads((tmp_path / "robustness.json").read_text())
     assert doc["rows"] == [{"case": "clean"}] and doc["scene"]["settings"] == {"n": 1}
     assert seen["cases"] == ["ar1", "drift"] and seen["workers"] == 1 and seen["quick"] is False
+    assert seen["fitters"] is None  # all three
+    args = ["bench", "--robustness", "--scene", "--cases", "ar1", "--fitters", "ours-scene", "-o", str(tmp_path)]
+    assert main(args) in (0, None), capsys.readouterr().err
+    assert seen["fitters"] == ["ours-scene"] and seen["cases"] == ["ar1"]
     assert (tmp_path / "robustness_scene.txt").read_text().startswith("case")
     for args, message in (
         (["--scene"], "--scene: the scene column"),
         (["--robustness", "--scene", "--cases", "nope"], "--cases: 'nope'"),
         (["--robustness", "--workers", "1"], "--workers: only with --robustness --scene"),
+        (["--robustness", "--scene", "--fitters", "ours,celerite2"], "--fitters: 'celerite2'; allowed: ours-scene"),
+        (["--robustness", "--scene", "--fitters", ","], "--fitters: none given"),
+        (["--realdata", "--fitters", "ours"], "--fitters: only with --robustness --scene"),
     ):
         r = run_cli("bench", *args, "-o", str(tmp_path / "x"))
         assert r.returncode == 2 and message in r.stderr, r.stderr
