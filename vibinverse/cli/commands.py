@@ -507,12 +507,7 @@ def _bench_robustness_scene(args: argparse.Namespace, out: Path, js: Path) -> di
     from vibinverse.bench.robustness_scene import FITTERS, SCENE_CASES, run, table
 
     cases = _case_names(args, list(SCENE_CASES))
-    fitters = [f.strip() for f in args.fitters.split(",") if f.strip()] if args.fitters is not None else None
-    for f in fitters if fitters is not None else []:
-        if f not in FITTERS:
-            raise InputError(f"--fitters: {f!r}; allowed: {', '.join(FITTERS)}")
-    if fitters == []:
-        raise InputError(f"--fitters: none given; allowed: {', '.join(FITTERS)}")
+    fitters = _listed("--fitters", args.fitters, FITTERS)
     txt, fits = out / SCENE_TABLE, out / SCENE_FITS
     _check_outputs({js.name: js, txt.name: txt, fits.name: fits}, {})
     with created(out):
@@ -540,12 +535,21 @@ def _bench_imaging(quick: bool) -> tuple[dict, Any]:
     return result, lambda p: plot(result, p)
 
 
+def _listed(flag: str, text: str | None, allowed: Sequence[str] | None = None) -> list[str] | None:
+    """A comma-separated option as a list (None when not given), each name checked against
+    `allowed` when given."""
+    names = [c.strip() for c in text.split(",") if c.strip()] if text is not None else None
+    for c in names or []:
+        if allowed is not None and c not in allowed:
+            raise InputError(f"{flag}: {c!r}; allowed: {', '.join(allowed)}")
+    if names == [] and allowed is not None:
+        raise InputError(f"{flag}: none given; allowed: {', '.join(allowed)}")
+    return names
+
+
 def _case_names(args: argparse.Namespace, allowed: Sequence[str] | None = None) -> list[str] | None:
     """--cases as a list (None: all), each checked against `allowed` when given, and --workers >= 1."""
-    cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases is not None else None
-    for c in cases or []:
-        if allowed is not None and c not in allowed:
-            raise InputError(f"--cases: {c!r}; allowed: {', '.join(allowed)}")
+    cases = _listed("--cases", args.cases, allowed)
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers: {args.workers}; allowed: 1 or more")
     return cases
