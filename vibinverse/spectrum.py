@@ -30,15 +30,23 @@ def local_background(power: np.ndarray, width: int) -> np.ndarray:
     return np.maximum(median_filter(power, size=width, mode="mirror") / np.log(2.0), np.finfo(float).tiny)
 
 
-def periodogram(series: Series, pad: int = PAD) -> tuple[np.ndarray, np.ndarray]:
+def periodogram(series: Series, pad: int = PAD, taper: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Power of the de-meaned series on (0, Nyquist]. Uniform sampling: FFT with `pad`-fold zero
     padding, gaps filled with the mean, |sum y e^{-i w t}|^2 / N. Irregular stamps (jitter, dropped
     frames): the floating-mean Lomb-Scargle periodogram of the valid samples (nifty-ls, a NUFFT:
     milliseconds where a direct sum took seconds), in its "psd" normalization, which is the same
     |sum y e^{-i w t}|^2 / N on a uniform grid; frequencies k / (pad * span) up to half the median
-    sample rate."""
+    sample rate.
+
+    `taper`: the series less its least-squares line, times a Hann window over its span (at the
+    stamps), scaled to keep white noise's level (`tapered`): a slow component (a drift, a gain
+    drift of 20 % on the level) leaks from its ends as 1/f^2 over the untapered spectrum and
+    buried a 10 Hz drive and a 3.5 Hz resonance under it 70 times over; the Hann window's leakage
+    falls as 1/f^6, at the price of peaks twice as wide."""
     good = np.isfinite(series.intensity)
     y = series.intensity - np.nanmean(series.intensity)
+    if taper:
+        y = tapered(series.time, y)
     if series.uniform:
         filled = np.where(good, y, 0.0)
         n = pad * filled.size
@@ -52,6 +60,56 @@ def periodogram(series: Series, pad: int = PAD) -> tuple[np.ndarray, np.ndarray]
     nf = max(int(0.5 * series.fs / df), 2)
     res = nifty_ls.lombscargle(t, np.ascontiguousarray(y[good]), fmin=df, fmax=nf * df, Nf=nf, normalization="psd")
     return res.freq(), np.asarray(res.power, dtype=float)
+
+
+def tapered(t: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """y (NaN at gaps) less its least-squares line over the valid samples, times the Hann window
+    sin^2(pi (t - t0) / span) at the stamps, divided by the window's rms over the valid samples."""
+    t = np.asarray(t, dtype=float)
+    good = np.isfinite(y)
+    if good.sum() < 3:
+        return y
+    line = np.polyval(np.polyfit(t[good] - t[0], y[good], 1), t - t[0])
+    span = t[-1] - t[0]
+    window = np.sin(np.pi * (t - t[0]) / span) ** 2 if span > 0 else np.ones_like(t)
+    rms = float(np.sqrt(np.mean(window[good] ** 2)))
+    return (y - line) * window / max(rms, np.finfo(float).tiny)
+
+
+#: a slow component (a drift, a gain drift) has at most this many cycles per record: `line_candidates`
+#: regresses out what is slower than this and than its band
+SLOW_CYCLES = 4.0
+#: `highpassed` regresses out at most this many slow sequences (an hour-long record's slow part lies
+#: hundreds of bins below any resonance, where the taper alone keeps it)
+MAX_SLOW_SEQUENCES = 32
+#: sequences beyond the 2 N W well-concentrated ones: a slow sinusoid near f_cut in a 20 s record
+#: left ~1e-3 of its power without them, ~1e-5 with them
+SLOW_EXTRA = 3
+
+
+def highpassed(t: np.ndarray, y: np.ndarray, f_cut: float) -> np.ndarray:
+    """y (NaN at gaps) less its least-squares fit on a constant and the first K discrete prolate
+    spheroidal (Slepian) sequences of half-bandwidth f_cut over the record (NW = f_cut x span,
+    K = 2 NW + SLOW_EXTRA, at most MAX_SLOW_SEQUENCES), fitted at the valid stamps (gaps, and
+    irregular stamps by interpolation): the basis that holds most of the energy of anything slower
+    than f_cut over a finite record (Slepian 1978), so a drift's or a gain drift's few cycles per
+    record are removed to ~1e-5 of their power while a resonance above f_cut keeps its own.
+    Regressed out instead of filtered, it leaves no filter transient at the record's ends."""
+    from scipy.signal.windows import dpss
+
+    t = np.asarray(t, dtype=float)
+    good = np.isfinite(y)
+    n = t.size
+    span = float(t[-1] - t[0]) if n > 1 else 0.0
+    k = min(int(2.0 * f_cut * span) + SLOW_EXTRA, MAX_SLOW_SEQUENCES)
+    if span <= 0 or k < 1 or good.sum() <= 2 * (k + 1):
+        return y - np.nanmean(y)
+    nw = max(min(f_cut * span, (k - SLOW_EXTRA) / 2.0), 0.5)
+    grid = np.linspace(t[0], t[-1], n)
+    seq = np.atleast_2d(dpss(n, nw, k))
+    basis = np.column_stack([np.ones(n), *(np.interp(t, grid, s) for s in seq)])
+    coef, *_ = np.linalg.lstsq(basis[good], y[good], rcond=None)
+    return y - basis @ coef
 
 
 def sinusoid(t: np.ndarray, y: np.ndarray, f: float) -> tuple[float, float, np.ndarray]:
@@ -167,14 +225,20 @@ def line_candidates(series: Series, band: tuple[float, float], n_candidates: int
 
     Each peak is taken from the periodogram of what the peaks before it leave (their sinusoids
     subtracted): a strong, lightly damped resonance's window sidelobes would otherwise hide a weak
-    line far from it. A peak is the largest ratio of the power to its local background (the running
-    median over BACKGROUND_BINS Fourier bins, `local_background`), not the largest power: under
+    line far from it. What is slower than the band (below its lower edge, and below SLOW_CYCLES
+    cycles per record: a band that starts between two lines is no slow part) is regressed out
+    first (`highpassed`): a gain drift of 20 % on a bright level leaked as 1/f^2 over the whole
+    periodogram and buried a 10 Hz drive 70 times over (a Hann taper would do it too, but it
+    silences a decay at the record's start). A peak is the largest ratio of the power to its local
+    background (the running median over BACKGROUND_BINS Fourier bins, `local_background`), not the largest power: under
     coloured noise (AR(1), 1/f, a drift) the raw periodogram's largest values are the noise's low
     frequencies, and a drive standing 20 times over its neighbours at 10 Hz came after three of
     them (the scene fit then started its drive there and stayed); over a flat floor the two
     rankings agree."""
     t, y = series.time, series.intensity
-    resid = y - np.nanmean(y)
+    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    slow = min(band[0], SLOW_CYCLES / span) if span > 0 else 0.0
+    resid = highpassed(t, y, slow) if slow > 0 else y - np.nanmean(y)
     picked: list[float] = []
     for _ in range(n_candidates):
         freqs, power = periodogram(Series(t, resid, series.source))

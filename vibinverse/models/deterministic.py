@@ -535,8 +535,9 @@ class DeterministicModel(SignalModel):
     def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
         """Periodogram peaks in each frequency prior and in twice it (taken as 2f), amplitudes and
         phases calibrated through the forward model (`deterministic_spectral.response_guesses`);
-        the nuisance terms' from their spectral starts."""
-        return self.nuisance.complete(response_guesses(self.series, self, bounds))
+        the nuisance terms' from their spectral starts, a gain drift's constant from the intensity
+        at rest (`NuisanceState.complete`)."""
+        return self.nuisance.complete(response_guesses(self.series, self, bounds), lambda g: self.parts(g)[0])
 
     def nuisance_priors(self) -> dict[str, Prior]:
         """The nuisance terms' default priors (`Term.priors`)."""

@@ -485,8 +485,9 @@ class FrameModel(SignalModel):
 
     def guesses(self, bounds: dict[str, tuple[float, float]]) -> list[dict[str, float]]:
         """One start per plausible drive line, most steady first (`frame_spectral.frame_guesses`),
-        the nuisance terms' from their spectral starts (`Term.starts`)."""
-        return self.nuisance.complete(frame_guesses(self.series, self, bounds))
+        the nuisance terms' from their spectral starts (`Term.starts`), a gain drift's constant
+        from the intensity at rest (`NuisanceState.complete`)."""
+        return self.nuisance.complete(frame_guesses(self.series, self, bounds), lambda g: self.observation(g)[0])
 
     def line_tests(self, values: dict[str, float], free: list[str]) -> list[LineTest]:
         """The drive line (its amplitude to 0) and the tilt resonance (the base noise to 0)."""

@@ -13,7 +13,7 @@ from scipy.ndimage import uniform_filter1d
 
 from vibinverse.io.series import Series
 from vibinverse.models.base import SignalModel
-from vibinverse.spectrum import line_candidates, periodogram, sinusoid
+from vibinverse.spectrum import highpassed, line_candidates, periodogram, sinusoid
 
 
 def frame_guesses(
@@ -83,12 +83,18 @@ def frame_guess(
     d2 = np.diff(resid, 2)
     sigma = float(np.nanstd(d2) / np.sqrt(6.0))
     guess["noise.sigma"] = sigma
-    series_r = Series(t, resid, series.source)
-    fr, pr = periodogram(series_r)
+    # the resonance: the smoothed periodogram's peak within its prior, its half-power width; the
+    # periodogram of the residual less its slow part (below half the prior's lower edge) and
+    # tapered: a gain drift of 20 % on the level leaked as 1/f^2 over the untapered spectrum, and
+    # the Hann window's main lobe still held the prior's lower edge 400x over a 3.5 Hz resonance
+    lo_f, hi_f = bounds.get(k + "tilt_frequency", (0.3, nyq))
+    fast = highpassed(t, resid, lo_f)
+    series_r = Series(t, fast, series.source)
+    fr, pr = periodogram(series_r, taper=True)
+    pr = np.where(fr >= lo_f, pr, 0.0)  # what is left below the prior is not smoothed into it
     smooth = uniform_filter1d(pr, max(3, int(0.3 / (fr[1] - fr[0]))))
     if has_drive:
         smooth[np.abs(fr - guess[k + "drive_frequency"]) < 1.0] = 0.0
-    lo_f, hi_f = bounds.get(k + "tilt_frequency", (0.3, nyq))
     smooth[(fr < lo_f) | (fr > hi_f)] = 0.0
     i = int(np.argmax(smooth))
     f_t = float(fr[i])
@@ -114,6 +120,8 @@ def frame_guess(
     probe.update({k + "noise_rms": 1.0, k + "drive_amplitude": 0.0, k + "drive_frequency": f_d or 1.0})
     c = like.components(probe)
     unit_var = c.tilt_variance()
-    stoch = max(float(np.nanvar(resid)) - sigma**2, 1e-6 * sigma**2)
+    # the slow part is not the tilt: a gain drift's variance made the tilt's start so large that
+    # the pixel saw it at second order
+    stoch = max(float(np.nanvar(fast)) - sigma**2, 1e-6 * sigma**2)
     guess[k + "noise_rms"] = float(np.sqrt(stoch / max(unit_var, 1e-300)))
     return guess

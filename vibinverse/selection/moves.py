@@ -8,7 +8,7 @@ from abc import ABC, abstractmethod
 from dataclasses import replace
 from typing import ClassVar
 
-from vibinverse.terms.drift import GAIN_TERMS, RandomWalk
+from vibinverse.terms.drift import SCENE_GAIN_TERMS, RandomWalk
 from vibinverse.terms.nuisance import DRIFT_TERMS, NO_DRIFT, NO_NOISE, NOISE_TERMS, NuisanceSpec
 
 Proposal = tuple[str, NuisanceSpec]
@@ -86,7 +86,8 @@ class AddDrift(Move):
 
 @register_move
 class AddGainDrift(Move):
-    """A multiplicative gain drift (6 cosines, 0.5-3 cycles per record): a cloud dims the whole
+    """A multiplicative gain drift (SCENE_GAIN_TERMS slow functions up to 4 cycles per record, and a
+    constant beside a scene model's fixed level): a cloud dims the whole
     signal, the vibration included, so the resonance's and the lines' amplitudes follow the level;
     an additive drift cannot say that."""
 
@@ -94,7 +95,7 @@ class AddGainDrift(Move):
     changes = ("gain",)
 
     def propose(self, spec: NuisanceSpec) -> list[Proposal]:
-        return [] if spec.gain else [("gain drift added", replace(spec, gain=GAIN_TERMS))]
+        return [] if spec.gain else [("gain drift added", replace(spec, gain=SCENE_GAIN_TERMS))]
 
 
 @register_move

@@ -5,7 +5,8 @@ its own state (`FrameModel`: the tilt modes + these terms, one Kalman engine).""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -16,7 +17,7 @@ from vibinverse.engines.state_space import StateSpace
 from vibinverse.errors import SceneError
 from vibinverse.priors import Prior
 from vibinverse.terms.base import DataFacts, Term, TermSum, one_dummy_state
-from vibinverse.terms.drift import GAIN_TERMS, GainDrift, IntegratedWalk, RandomWalk
+from vibinverse.terms.drift import GAIN_LIMIT, SCENE_GAIN_TERMS, GainDrift, IntegratedWalk, RandomWalk
 from vibinverse.terms.noise import AR1, Flicker, White
 
 #: the coloured noise by its table spelling ("white": none) and the drift ("none": none)
@@ -26,7 +27,7 @@ NOISE_KINDS = tuple(NOISE_TERMS)
 DRIFT_KINDS = tuple(DRIFT_TERMS)
 NO_NOISE = next(k for k, cls in NOISE_TERMS.items() if cls is None)  # the table's spelling of "none"
 NO_DRIFT = next(k for k, cls in DRIFT_TERMS.items() if cls is None)
-GAIN_WORDS = {"drift": GAIN_TERMS, "none": 0}  # --gain drift / none
+GAIN_WORDS = {"drift": SCENE_GAIN_TERMS, "none": 0}  # --gain drift / none
 SPEC_KEYS = ("noise", "drift", "gain", "white")  # what a spec holds (the search's open or fixed keys)
 KEYS = (*SPEC_KEYS, "values", "start")
 
@@ -59,7 +60,7 @@ class NuisanceKinds:
 @dataclass(frozen=True)
 class NuisanceSpec(NuisanceKinds):
     """Which nuisance terms: the coloured noise ("white": none, "ar1", "1/f"), the drift ("none",
-    "walk", "integrated"), the gain drift's cosines (0: none) and the white sensor noise (False only
+    "walk", "integrated"), the gain drift's slow functions (0: none) and the white sensor noise (False only
     beside a coloured noise, which then is the whole noise)."""
 
     noise: str = "white"
@@ -91,9 +92,11 @@ class NuisanceSpec(NuisanceKinds):
         if isinstance(gain, str):
             gain = GAIN_WORDS.get(gain, gain)
         elif gain is True or gain is False or gain is None:
-            gain = GAIN_TERMS if gain else 0
+            gain = SCENE_GAIN_TERMS if gain else 0
         if isinstance(gain, bool) or not isinstance(gain, (int, np.integer)) or not 0 <= int(gain) <= 24:
-            raise SceneError(f"{key}.gain: {m.get('gain')!r}; allowed: false, true ({GAIN_TERMS} cosines) or 0..24")
+            raise SceneError(
+                f"{key}.gain: {m.get('gain')!r}; allowed: false, true ({SCENE_GAIN_TERMS} slow functions) or 0..24"
+            )
         white = m.get("white", True)
         if not isinstance(white, (bool, np.bool_)):
             raise SceneError(f"{key}.white: {white!r}; allowed: true, or false beside noise = 'ar1' or '1/f'")
@@ -103,11 +106,12 @@ class NuisanceSpec(NuisanceKinds):
         """The `nuisance` sub-table of this spec."""
         return {"noise": self.noise, "drift": self.drift, "gain": self.gain, "white": self.white}
 
-    def terms(self, white: bool | None = None) -> TermSum:
-        """The terms (the white noise only when `white`, default: the spec's)."""
+    def terms(self, white: bool | None = None, level_free: bool = True) -> TermSum:
+        """The terms (the white noise only when `white`, default: the spec's); a gain drift with its
+        constant when the model's level is not free (`level_free` False: a scene model)."""
         out = [cls() for cls in (NOISE_TERMS[self.noise], DRIFT_TERMS[self.drift]) if cls is not None]
         if self.gain:
-            out.append(GainDrift(self.gain))
+            out.append(GainDrift(self.gain, constant=not level_free))
         if self.white if white is None else white:
             out.append(White())
         return TermSum(*out)
@@ -125,7 +129,7 @@ class NuisanceState:
 
     def __init__(self, table: dict[str, Any], facts: DataFacts):
         self.spec = NuisanceSpec.from_table(table)
-        self.terms = self.spec.terms(white=False)
+        self.terms = self.spec.terms(white=False, level_free=False)
         self.facts = facts
         given = table.get("nuisance") or {}
         self._given = {k: float(x) for key in ("start", "values") for k, x in (given.get(key) or {}).items()}
@@ -146,11 +150,26 @@ class NuisanceState:
     def priors(self) -> dict[str, Prior]:
         return self.terms.priors(self.facts)
 
-    def complete(self, guesses: list[dict[str, float]]) -> list[dict[str, float]]:
+    def complete(
+        self, guesses: list[dict[str, float]], level: Callable[[dict[str, float]], float] | None = None
+    ) -> list[dict[str, float]]:
         """The model's starting values with the terms' added (and the white noise's sigma dropped
-        when the spec has none), in place."""
+        when the spec has none), in place. `level`: the model's own level at a guess (its mean at
+        rest); a gain drift's constant `gain.a0` then starts at the data's mean over it, less 1, and
+        its slow coefficients (fitted relative to the data's mean) are rescaled to that level. From
+        0, a 20 % gain drift's mean of -1.7 % (9 intensity units on a level of 537, 15x the noise)
+        put the start 300,000 ln-units down and the optimum reached from it at a 0.23 Hz tilt."""
         for g in guesses:
             g.update({n: self.value({}, n) for n in self.names()})
+            if "gain.a0" in g and level is not None and "gain.a0" not in self._given:
+                at_rest = float(level(g))
+                if math.isfinite(at_rest) and abs(at_rest) > 0:
+                    ratio = self.facts.level / at_rest
+                    limit = 0.9 * GAIN_LIMIT
+                    g["gain.a0"] = float(np.clip(ratio - 1.0, -limit, limit))
+                    for n in self.names():
+                        if n.startswith("gain.") and n != "gain.a0" and n not in self._given:
+                            g[n] = float(np.clip(g[n] * ratio, -limit, limit))
             if not self.white:
                 g.pop("noise.sigma", None)
         return guesses
@@ -175,7 +194,7 @@ class NuisanceState:
         """(the state space, whether the values are inside the terms' domain): the model's own
         states first (`lead` = (phis, qs, p0, h) in `blocks` of 1 or 2 states, which a gain drift
         multiplies), the terms' after them, measurement variance `r`, the multiplier cut to
-        `samples` (a stretch of the record keeps the whole record's cosines). Outside the domain the
+        `samples` (a stretch of the record keeps the whole record's slow functions). Outside the domain the
         tables are formed at the starts."""
         v = {n: self.value(values, n) for n in self.names()}
         valid = self.terms.valid(v)

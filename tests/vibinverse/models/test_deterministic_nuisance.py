@@ -11,6 +11,7 @@ from scipy.stats import multivariate_normal
 from tests.conftest import LOW_RES, K, simulate
 from vibinverse.errors import SceneError
 from vibinverse.models import build_model
+from vibinverse.terms.drift import slepian_gain_basis as gain_basis
 
 SHORT = (LOW_RES, "sampling.duration=0.15")  # 150 samples at 1 kHz: the dense oracle stays cheap
 
@@ -33,9 +34,9 @@ def test_plate_beside_ar1_and_a_walk_is_the_dense_gaussian_density():
 def test_a_gain_drift_multiplies_the_plates_mean():
     table, data = simulate("roof_elastic", *SHORT, seed=3)
     model = build_model({**table, "nuisance": {"gain": 2}}, data)
-    v = {"gain.a1": 0.1, "gain.a2": -0.2, "noise.sigma": 0.05}
+    v = {"gain.a0": 0.02, "gain.a1": 0.1, "gain.a2": -0.2, "noise.sigma": 0.05}
     t = data.time - data.time[0]
-    m = 1 + 0.1 * np.cos(np.pi * t / t[-1]) - 0.2 * np.cos(2 * np.pi * t / t[-1])
+    m = 1.02 + np.array([0.1, -0.2]) @ gain_basis(t, 2)
     plain = build_model(table, data)
     dense = multivariate_normal(m * plain.mean(v), 0.0025 * np.eye(t.size)).logpdf(data.intensity)
     assert model.log_likelihood(v) == pytest.approx(dense, rel=1e-9)
