@@ -84,9 +84,10 @@ def frame_guess(
     sigma = float(np.nanstd(d2) / np.sqrt(6.0))
     guess["noise.sigma"] = sigma
     # the resonance: the smoothed periodogram's peak within its prior, its half-power width; the
-    # periodogram of the residual less its slow part (below half the prior's lower edge) and
-    # tapered: a gain drift of 20 % on the level leaked as 1/f^2 over the untapered spectrum, and
-    # the Hann window's main lobe still held the prior's lower edge 400x over a 3.5 Hz resonance
+    # periodogram of the residual less its part slower than the prior's lower edge (`highpassed`)
+    # and tapered: a gain drift of 20 % on the level leaked as 1/f^2 over the untapered spectrum,
+    # and the Hann window's main lobe alone still held the prior's lower edge 400x over a 3.5 Hz
+    # resonance
     lo_f, hi_f = bounds.get(k + "tilt_frequency", (0.3, nyq))
     fast = highpassed(t, resid, lo_f)
     series_r = Series(t, fast, series.source)

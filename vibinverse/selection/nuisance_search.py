@@ -11,8 +11,8 @@ proposal: first with only its new parameters and the noise levels free, the rest
 current optimum (cheap, and a lower bound on its gain), then, for proposals within 0.5 ln n of
 lowering the BIC that way, with every parameter free (`vibinverse.optimize.maximize`: maximum
 likelihood inside the priors' support, in the Posterior's unconstrained space), from there and, when
-the scene's own values have left their spectral start, from that start too (`_fresh_start`: the
-current reading was made without the proposal's term), the larger maximum kept. The proposal that
+the scene's own values have left their spectral starts, from the proposal's own spectral start too
+(`_fresh_start`: the current reading was made without the proposal's term), the larger maximum kept. The proposal that
 lowers the BIC most is taken; the search stops when none does (or after MAX_STEPS). A key the user
 fixes (`noise`, `drift`, `gain`, `white` in the table or on the command line) is not searched; with
 all four fixed there is no search.
@@ -46,7 +46,7 @@ logger = logging.getLogger(__name__)
 
 MAX_STEPS = 6
 SCREEN_MARGIN = 0.5  # x ln n: a partial fit this close to lowering the BIC is refitted in full
-FRESH_APART = 0.05  # a full refit starts again from the scene's spectral start when a value is this far (relative)
+FRESH_APART = 0.05  # a full refit also starts from the spectral start when a scene value is this far (relative)
 
 
 @dataclass
