@@ -74,7 +74,7 @@ class NuisanceSearch:
 
     def table(self) -> dict[str, Any]:
         """The `nuisance` table of the chosen terms, their optimum as the fit's start."""
-        names = set(self.chosen.spec.terms().names()) - {"noise.sigma"}
+        names = set(self.chosen.spec.terms(level_free=False).names()) - {"noise.sigma"}  # a scene's: gain.a0 too
         start = {n: v for n, v in self.chosen.values.items() if n in names}
         return {**self.chosen.spec.table(), **({"start": start} if start else {})}
 

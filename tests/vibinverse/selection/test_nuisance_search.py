@@ -13,7 +13,7 @@ from tests.conftest import K, frame, frame_series
 from vibinverse.models.frame import FrameModel
 from vibinverse.models.modal import ModalModel
 from vibinverse.selection.moves import MOVES
-from vibinverse.selection.nuisance_search import search_nuisance, wanted
+from vibinverse.selection.nuisance_search import NuisanceSearch, Reading, search_nuisance, wanted
 from vibinverse.terms.nuisance import NuisanceSpec
 
 SPECS = (
@@ -70,3 +70,13 @@ def test_a_default_scene_fit_reports_its_search_and_keeps_a_fixed_key():
     assert result.summary()["data"]["model"]["terms"] == "AR(1) noise, white noise"
     tilt = result.summary()["parameters"][K + "tilt_frequency"]
     assert abs(tilt["map"] / (2 * math.sqrt(3)) - 1) < 0.01
+
+
+def test_the_chosen_gain_drifts_start_keeps_its_constant():
+    """The search's table (the fit's start) holds a scene gain drift's constant `gain.a0` beside its
+    slow coefficients, and no white-noise sigma."""
+    spec = NuisanceSpec(gain=2)
+    values = {"gain.a0": -0.017, "gain.a1": 0.05, "gain.a2": -0.02, "noise.sigma": 0.6, K + "tilt_frequency": 3.4}
+    table = NuisanceSearch(Reading(spec, values, -1.0, 5, 100)).table()
+    assert table["start"] == {"gain.a0": -0.017, "gain.a1": 0.05, "gain.a2": -0.02}
+    assert table["gain"] == 2
