@@ -73,10 +73,24 @@ def _terminate(signum: int, frame: object) -> None:
     raise Interrupted("terminated", signum=signum)
 
 
+_SIGINT_SEEN = {"seen": False}
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    """Ctrl-C: remembered, then raised as KeyboardInterrupt (Python's own handler). A C extension
+    that catches it inside a Python callback raises its own error instead (casadi's IPOPT:
+    "RuntimeError: ... returned a result with an exception set"), which `main` then reads as the
+    interruption it is."""
+    _SIGINT_SEEN["seen"] = True
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; the exit code. The package logger's console handler, level and propagation
     are restored afterwards, so a caller that runs `main` in its own process keeps its logging."""
     previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
+    previous_int = signal.signal(signal.SIGINT, _interrupt) if _main_thread() else None
+    _SIGINT_SEEN["seen"] = False
     package = logging.getLogger("vibinverse")
     saved = (list(package.handlers), package.level, package.propagate)
     try:
@@ -103,14 +117,16 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
         return 0
-    except Exception as exc:  # Ctrl-C inside a C extension's import comes back as ImportError
-        if not _interrupted(exc):
+    except Exception as exc:  # Ctrl-C inside a C extension comes back as its error (an import's ImportError)
+        if not (_interrupted(exc) or _SIGINT_SEEN["seen"]):
             raise
         print("vibinverse: interrupted", file=sys.stderr)
         return SIGNAL_EXIT[signal.SIGINT]
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+        if previous_int is not None:
+            signal.signal(signal.SIGINT, previous_int)
         package.handlers[:], package.propagate = saved[0], saved[2]
         package.setLevel(saved[1])
     return 0

@@ -484,6 +484,43 @@ def test_fit_without_a_scene_uses_the_modal_model_with_the_order_fixed_or_chosen
     assert forced["parameters"]["modes[0].frequency"]["median"] == pytest.approx(2.2, rel=0.01)
 
 
+def test_ctrl_c_that_an_extension_turns_into_its_own_error_is_one_line_and_130(monkeypatch, capsys):
+    """Ctrl-C inside casadi's IPOPT callback comes back as casadi's RuntimeError, the
+    KeyboardInterrupt not in its chain (seen in the Ctrl-C test at 2.5 s): main remembers the
+    signal (its SIGINT handler), so still one line, 130; without a signal the error is raised."""
+    import argparse
+    import os
+    import signal
+
+    from vibinverse import cli
+    from vibinverse.cli import commands
+
+    def verb(args):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)  # main's handler raises KeyboardInterrupt here
+            for _ in range(1000):  # the signal is handled between bytecodes
+                pass
+        except KeyboardInterrupt:
+            pass  # what the extension does: its own error, no chain
+        raise RuntimeError("Error in Function::call for 'solver': returned a result with an exception set")
+
+    monkeypatch.setattr(
+        commands, "build_parser", lambda: type("P", (), {"parse_args": lambda s, a: argparse.Namespace(func=verb)})()
+    )
+    assert cli.main([]) == 130
+    assert capsys.readouterr().err.strip() == "vibinverse: interrupted"
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+
+    def failing(args):
+        raise RuntimeError("a real solver error")
+
+    monkeypatch.setattr(
+        commands, "build_parser", lambda: type("P", (), {"parse_args": lambda s, a: argparse.Namespace(func=failing)})()
+    )
+    with pytest.raises(RuntimeError, match="a real solver error"):
+        cli.main([])
+
+
 def test_ctrl_c_inside_an_extension_import_is_one_line_and_130(monkeypatch, capsys):
     """Ctrl-C while a C extension initializes comes back as "ImportError: initialization failed"
     raised from the KeyboardInterrupt (seen in the Ctrl-C test at 1.5 s): still one line, 130."""
