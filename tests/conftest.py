@@ -289,3 +289,30 @@ def unbounded_result():
         },
         timing={"mcmc_s": 1.5},
     )
+
+
+#: the decimated building record's modes: (Hz, damping ratio, rms)
+BUILDING_MODES = ((1.92, 0.012, 1.0), (2.31, 0.015, 0.7), (2.68, 0.010, 0.5))
+
+
+def decimated_building(seed: int, seconds: float, ftype: str = "iir") -> Series:
+    """A logger's building record: three modes (`BUILDING_MODES`, each an oscillator driven by
+    white noise, simulated at 100 Hz by its exact zero-order-hold discretization), white noise of
+    0.3 and a random walk of rate 0.02 per sqrt(s), decimated to 10 Hz by `scipy.signal.decimate`
+    (`ftype` "iir": its Chebyshev low-pass from 0.8 x Nyquist, zero phase)."""
+    from scipy import signal
+
+    rng = np.random.default_rng(seed)
+    fs = 100.0
+    n = round(seconds * fs)
+    y = np.zeros(n)
+    for f, zeta, rms in BUILDING_MODES:
+        w = 2.0 * np.pi * f
+        a = np.array([[0.0, 1.0], [-w * w, -2.0 * zeta * w]])
+        ad, bd, *_ = signal.cont2discrete((a, np.array([[0.0], [1.0]]), np.eye(2), np.zeros((2, 1))), 1.0 / fs)
+        num, den = signal.ss2tf(ad, bd, np.array([[1.0, 0.0]]), np.zeros((1, 1)))
+        x = signal.lfilter(num[0], den, rng.standard_normal(n))
+        y += rms * x / x.std()
+    y += 0.3 * rng.standard_normal(n) + 0.02 * np.cumsum(rng.standard_normal(n)) / np.sqrt(fs)
+    yd = signal.decimate(y, 10, ftype=ftype, zero_phase=True)
+    return Series(np.arange(yd.size) / 10.0, yd, f"decimated building (seed {seed})")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import copy
 import logging
+import math
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -125,6 +126,28 @@ def with_nuisance(
     return table
 
 
+def with_passband(series: Series) -> Series:
+    """The series with its `passband` set when its spectrum shows a logger's anti-alias roll-off
+    (`vibinverse.spectrum.passband_top`), said in its notes; else the series itself. The modal
+    model is then fitted below it (Whittle's likelihood on the ordinates below it, its frequency
+    priors and the order search's candidates up to it)."""
+    from dataclasses import replace
+
+    from vibinverse.spectrum import passband_top
+
+    if series.passband is not None:
+        return series
+    top = passband_top(series)
+    if top is None:
+        return series
+    note = (
+        f"anti-alias roll-off: the spectrum plunges above {top:.4g} Hz (Nyquist {0.5 * series.fs:.4g} Hz), "
+        f"a logger's or a decimation's low-pass filter; modes and lines are fitted below {top:.4g} Hz"
+    )
+    logger.info("data: %s", note)
+    return replace(series, passband=top, notes=[*series.notes, note])
+
+
 def build_posterior(
     series: SeriesLike,
     scene: SceneLike | None,
@@ -145,6 +168,7 @@ def build_posterior(
     if nuisance:
         scene, overrides = with_nuisance(scene, overrides, nuisance, modal), ()
     if modal:
+        data = with_passband(data)
         table, order = _modal_table(data, scene, overrides)
         model = ModalModel.name
     else:
@@ -158,6 +182,14 @@ def build_posterior(
                 table["nuisance"] = {**(table.get("nuisance") or {}), **order.table()}
     with scene_errors():
         sm = build_model(table, data, model)
+        if modal:
+            from vibinverse.models.modal import exact_affordable
+
+            start = {n: sm.value({}, n) for n in sm.spec.names()}
+            if not all(math.isfinite(v) for v in start.values()):
+                start = sm.guesses(sm.default_priors())[0]
+            if exact_affordable(sm, start):  # the search's Whittle, the fit's filter
+                sm.use_filter()
         for k in sm.unused_windows() if modal else []:
             lo, hi = sm.windows[k]
             logger.warning(

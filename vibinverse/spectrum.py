@@ -7,6 +7,8 @@ Milliseconds, rough, and gap-tolerant.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from vibinverse.io.series import Series
@@ -264,3 +266,101 @@ def line_candidates(series: Series, band: tuple[float, float], n_candidates: int
         )
         scored.append((float(np.abs(z - z.mean()).max() / max(np.abs(z.mean()), 1e-300)), f))
     return [f for _, f in sorted(scored)]
+
+
+#: `passband_top`: the spectrum's level is the median of each of at most ROLLOFF_BANDS equal bands
+#: of at least ROLLOFF_ORDINATES ordinates up to Nyquist (fewer than ROLLOFF_MIN_BANDS: not read)
+ROLLOFF_BANDS, ROLLOFF_ORDINATES, ROLLOFF_MIN_BANDS = 100, 40, 40
+#: the trend below a roll-off is a power law fitted over this fraction of Nyquist below the knee,
+#: where the levels stay within ROLLOFF_SMOOTH_DB of it in rms beside their own scatter (no peak
+#: there): the median of N exponential ordinates has a log sd of 1 / (ln 2 sqrt N), 6.3 / sqrt N dB
+ROLLOFF_WINDOW, ROLLOFF_SMOOTH_DB = 0.25, 1.0
+#: a roll-off: the top 3 % of the band ROLLOFF_DROP_DB below that trend's extrapolation and
+#: ROLLOFF_BELOW_DB below every band from 0.1 x Nyquist to the knee
+ROLLOFF_DROP_DB, ROLLOFF_BELOW_DB = 10.0, 6.0
+#: the passband ends ROLLOFF_MARGIN x Nyquist below the last band whose 3-band running median is
+#: within ROLLOFF_KEPT_DB of the trend (the roll-off's first decibel is in the trend's window)
+ROLLOFF_KEPT_DB, ROLLOFF_MARGIN = 1.0, 0.025
+
+
+def band_levels(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(level dB, lower edge, upper edge) of equal bands up to Nyquist (edges as fractions of it):
+    each the median ordinate of the periodogram of the record's differences over |1 - e^{-iw}|^2 (the
+    record's own spectrum, without the leakage of a drift's end-to-end jump), in decibels."""
+    d = np.diff(np.asarray(y, dtype=float))
+    m = d.size
+    spec = np.fft.rfft(d)[1 : m // 2 + 1]
+    w = 2.0 * np.pi * np.arange(1, spec.size + 1) / m
+    power = (spec.real**2 + spec.imag**2) / m / (4.0 * np.sin(0.5 * w) ** 2)
+    nb = int(min(ROLLOFF_BANDS, spec.size // ROLLOFF_ORDINATES))
+    if nb < 1:
+        return np.empty(0), np.empty(0), np.empty(0)
+    edges = np.linspace(0, spec.size, nb + 1).astype(int)
+    level = np.array([np.median(power[a:b]) for a, b in itertools.pairwise(edges)])
+    level = 10.0 * np.log10(np.maximum(level, np.finfo(float).tiny))
+    return level, edges[:-1] / spec.size, edges[1:] / spec.size
+
+
+def passband_top(series: Series) -> float | None:
+    """The top (Hz) of the band below a logger's anti-alias roll-off, None when the record shows
+    none (or is gappy, irregular or under ROLLOFF_MIN_BANDS x ROLLOFF_ORDINATES x 2 samples).
+
+    A record low-pass filtered before it was sampled or decimated (a logger's anti-alias filter;
+    `scipy.signal.decimate` and MATLAB's `decimate`: a Chebyshev filter from 0.8 x Nyquist; a
+    sigma-delta converter's from ~0.9) has a spectrum that plunges towards Nyquist, which a sampled
+    continuous-time model (white noise flat to Nyquist, resonances' tails aliased) cannot follow:
+    fitted to the whole band, 20-90 min 10 Hz building records so decimated got five or six modes,
+    one a broad "mode" near Nyquist carrying the noise floor, claimed. Read here from the band
+    levels (`band_levels`): from the highest knee down (0.95 to 0.5 x Nyquist by 0.025), the first
+    window below it that a power law fits within ROLLOFF_SMOOTH_DB (beside the levels' scatter) is
+    the trend; a roll-off when the top 3 % of the band lies ROLLOFF_DROP_DB under the trend's
+    extrapolation and ROLLOFF_BELOW_DB under every band from 0.1 x Nyquist to the knee (a
+    resonance's tail falls as a power law, and a floor after a peak is no lower than the floor
+    before it). The top: ROLLOFF_MARGIN x Nyquist below the upper edge of the last band whose
+    3-band running median is within ROLLOFF_KEPT_DB of the trend. Measured: white noise, AR(1)
+    phi 0.9, a random walk, a box filter (frame exposure), a resonance at 0.7 or 0.9 x Nyquist on
+    a flat floor and a steep resonance tail give none; `decimate` (IIR, 0.8) of white noise by 10
+    gives 0.8 x Nyquist, a 255-tap FIR at 0.9 0.825. `decimate`'s FIR variant (a Hamming window
+    whose -6 dB point is Nyquist) folds its own transition back: white noise stays within 3 dB of
+    flat, and none is read."""
+    from scipy.ndimage import median_filter
+
+    y = np.asarray(series.intensity, dtype=float)
+    if not series.uniform or not np.all(np.isfinite(y)) or y.size < 2 * ROLLOFF_MIN_BANDS * ROLLOFF_ORDINATES:
+        return None
+    level, lo, hi = band_levels(y)
+    if level.size < ROLLOFF_MIN_BANDS:
+        return None
+    scatter = 6.3 / np.sqrt((y.size - 1) // 2 / level.size)  # dB, a band level's sd
+    smooth = float(np.hypot(ROLLOFF_SMOOTH_DB, 2.0 * scatter))
+    mid = 0.5 * (lo + hi)
+    top = float(np.median(level[lo >= 0.97 - 1e-9]))
+    for knee in np.arange(0.95, 0.5 - 1e-9, -0.025):
+        window = (lo >= knee - ROLLOFF_WINDOW - 1e-9) & (hi <= knee + 1e-9)
+        x = np.log10(mid[window])
+        coef = np.polyfit(x, level[window], 1)
+        if np.sqrt(np.mean((np.polyval(coef, x) - level[window]) ** 2)) > smooth:
+            continue  # a peak or the roll-off itself in the window: a lower knee
+        drop = float(np.polyval(coef, np.log10(0.985))) - top
+        below = float(level[(lo >= 0.1) & (hi <= knee + 1e-9)].min()) - top
+        if drop < ROLLOFF_DROP_DB or below < ROLLOFF_BELOW_DB:
+            return None  # a smooth stretch with no plunge after it
+        near = median_filter(level - np.polyval(coef, np.log10(mid)), size=3, mode="nearest")
+        kept = np.flatnonzero((lo >= knee - ROLLOFF_WINDOW - 1e-9) & (near >= -ROLLOFF_KEPT_DB))
+        return float(((hi[kept.max()] if kept.size else knee) - ROLLOFF_MARGIN) * 0.5 * series.fs)
+    return None
+
+
+def white_floor(series: Series) -> float | None:
+    """An upper bound of the record's white-noise sigma: the square root of the lowest band's
+    median ordinate over ln 2 (`band_levels`, the bands from 0.05 x Nyquist to the series' `top`;
+    white noise of sigma has mean ordinate sigma^2, median sigma^2 ln 2). None for a gappy or
+    irregular record, or one too short for bands."""
+    y = np.asarray(series.intensity, dtype=float)
+    if not series.uniform or not np.all(np.isfinite(y)):
+        return None
+    level, lo, hi = band_levels(y)
+    inside = (lo >= 0.05) & (hi * 0.5 * series.fs <= series.top * (1.0 + 1e-9))
+    if not inside.any():
+        return None
+    return float(np.sqrt(10.0 ** (level[inside].min() / 10.0) / np.log(2.0)))

@@ -1,13 +1,17 @@
 """The periodogram: the FFT on a uniform grid (numbers unchanged), Lomb-Scargle by nifty-ls on
-irregular stamps (against scipy's direct sum), and the frame model's spectral starts on jittered
-stamps with dropped frames."""
+irregular stamps (against scipy's direct sum), the frame model's spectral starts on jittered
+stamps with dropped frames, and a logger's anti-alias roll-off (`passband_top`) with the white
+floor below it."""
+
+import dataclasses
 
 import numpy as np
 import pytest
+from scipy import signal
 
 from tests.conftest import SNR10, K, frame_problem
-from vibinverse.io.series import validate
-from vibinverse.spectrum import highpassed, line_candidates, periodogram
+from vibinverse.io.series import Series, validate
+from vibinverse.spectrum import highpassed, line_candidates, passband_top, periodogram, white_floor
 
 
 def _jittered(n=4000, dt=0.005, seed=0):
@@ -159,3 +163,66 @@ def test_highpassed_removes_the_slow_part_and_keeps_the_fast():
     assert np.isnan(out[1000:1100]).all() and np.isfinite(out[good]).all()
     assert np.std(out[good] - fast[good]) < 0.1
     assert np.var(highpassed(t, fast, 0.2)) > 0.99 * np.var(fast)
+
+
+def _uniform(y, fs=10.0):
+    return Series(np.arange(y.size) / fs, np.asarray(y, dtype=float), "test")
+
+
+def _noise(n, seed):
+    """White noise beside a weak random walk, at 10 times the rate a record is decimated to."""
+    rng = np.random.default_rng(seed)
+    return rng.standard_normal(n) + 0.01 * np.cumsum(rng.standard_normal(n))
+
+
+@pytest.mark.parametrize("n", [54_000, 6_000])
+def test_a_decimated_record_shows_its_anti_alias_roll_off(n):
+    """`scipy.signal.decimate`'s Chebyshev filter (0.8 x Nyquist) and a 255-tap FIR at 0.9 x
+    Nyquist (a converter's filter) are read within 0.05 x Nyquist below their edges."""
+    x = _noise(10 * n, n)
+    top = passband_top(_uniform(signal.decimate(x, 10, ftype="iir", zero_phase=True)))
+    assert top is not None and 0.75 * 5.0 <= top <= 0.81 * 5.0
+    top = passband_top(_uniform(signal.lfilter(signal.firwin(255, 0.9 / 10), 1.0, x)[::10]))
+    assert top is not None and 0.8 * 5.0 <= top <= 0.9 * 5.0
+
+
+@pytest.mark.parametrize("n", [54_000, 6_000])
+def test_spectra_that_fall_for_other_reasons_show_no_roll_off(n):
+    """White noise, AR(1) (phi 0.9), a random walk, a frame's exposure (a box average), a resonance
+    at 0.7 or 0.9 x Nyquist on a flat floor, a resonance's steep tail, and records with gaps or
+    irregular stamps: no passband."""
+    rng = np.random.default_rng(n)
+    e = lambda: rng.standard_normal(n)
+    peak = lambda f: signal.lfilter(*signal.iirpeak(f, 30), e()) * 30 + e()
+    cases = {
+        "white": e(),
+        "ar1": signal.lfilter([1.0], [1.0, -0.9], e()),
+        "walk": np.cumsum(e()) + 0.1 * e(),
+        "box": rng.standard_normal(10 * n).reshape(-1, 10).mean(axis=1),
+        "peak 0.7": peak(0.7),
+        "peak 0.9": peak(0.9),
+        "steep tail": signal.lfilter([1.0], [1.0, -1.8, 0.81], e()) + 1e-4 * e(),
+    }
+    for name, y in cases.items():
+        assert passband_top(_uniform(y)) is None, name
+    y = signal.decimate(_noise(10 * n, 1), 10, ftype="iir", zero_phase=True)
+    gappy = y.copy()
+    gappy[100:110] = np.nan
+    assert passband_top(_uniform(gappy)) is None
+    t = np.arange(n) / 10.0 + rng.uniform(-0.02, 0.02, n)
+    assert passband_top(Series(np.sort(t), y, "irregular")) is None
+
+
+def test_the_white_floor_bounds_white_noise_from_above():
+    """`white_floor` of white noise (sigma 2) within 25 % below its sigma and hardly above it; below
+    a passband the bands above its top are left out (a floor there would be the filter's): white
+    noise of sigma 2 decimated by 10 is white of 2 / sqrt(10) in its band."""
+    rng = np.random.default_rng(4)
+    floor = white_floor(_uniform(2.0 * rng.standard_normal(40_000)))
+    assert 0.75 * 2.0 <= floor <= 1.03 * 2.0
+    y = signal.decimate(2.0 * rng.standard_normal(400_000), 10, ftype="iir", zero_phase=True)
+    s = _uniform(y)
+    inband = 2.0 / np.sqrt(10.0)
+    assert white_floor(s) < 0.1 * inband  # the filter's stop band, read as a floor
+    s = dataclasses.replace(s, passband=passband_top(s))
+    assert 0.75 * inband <= white_floor(s) <= 1.03 * inband

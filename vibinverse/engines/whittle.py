@@ -327,24 +327,36 @@ class Periodogram:
     smooth density (log slope <= 2 / w: coloured noise, a drift's corner) varies by <= 2 / 16 over a
     group above the ungrouped ordinates. The record's transform, its lines and their gradients stay
     on every ordinate (`reduce` averages per-ordinate values into groups, `expand` repeats a
-    group's value over its ordinates)."""
+    group's value over its ordinates).
 
-    def __init__(self, n: int, differences: int, bins: int = 1):
+    `top` (cycles per sample, None: Nyquist) keeps the ordinates at or below it: Whittle's
+    likelihood of the band below a logger's anti-alias roll-off (`vibinverse.spectrum.passband_top`),
+    where the record's density is the model's; above it the filter, not the model, shapes it."""
+
+    def __init__(self, n: int, differences: int, bins: int = 1, top: float | None = None):
         if differences not in (0, 1):
             raise ValueError(f"differences: {differences}; allowed: 0 or 1")
         if int(bins) < 1:
             raise ValueError(f"bins: {bins}; allowed: 1 or more")
+        if top is not None and not 0.0 < top <= 0.5:
+            raise ValueError(f"top: {top}; allowed: in (0, 0.5] cycles per sample, or None")
         self.differences = differences
         self.m = fast_length(int(n) - differences)
-        j = np.arange(1, self.m // 2 + 1)
+        count = self.m // 2
+        if top is not None:  # the ordinates at or below `top` cycles per sample (at least one)
+            count = max(1, min(count, math.floor(top * self.m + 1e-9)))
+        self.top = top
+        j = np.arange(1, count + 1)
         w = 2.0 * np.pi * j / self.m
         self.cw, self.sw = np.cos(w), np.sin(w)
         self.c = 4.0 * np.sin(0.5 * w) ** 2
-        self.nyquist = self.m % 2 == 0
+        self.nyquist = self.m % 2 == 0 and count == self.m // 2
         #: each ordinate's weight in Whittle's sum: 1, the Nyquist ordinate 1/2
         self.ordinate_weights = np.ones(j.size)
         if self.nyquist:
             self.ordinate_weights[-1] = 0.5
+        #: the sum of the ordinates' weights: (m - 1) / 2 on the whole band
+        self.degrees = float(self.ordinate_weights.sum())
         self.bins = int(bins)
         if self.bins == 1:  # the group arrays are the ordinates' own
             self.group_cw, self.group_sw, self.group_c = self.cw, self.sw, self.c
@@ -376,7 +388,7 @@ class Periodogram:
         """The discrete Fourier transform of y (length n), or of its first differences, at the
         ordinates j = 1 .. m / 2."""
         d = np.diff(np.asarray(y, dtype=float)) if self.differences else np.asarray(y, dtype=float)
-        return np.fft.rfft(d[: self.m])[1 : self.m // 2 + 1]
+        return np.fft.rfft(d[: self.m])[1 : self.c.size + 1]
 
     def of(self, y: np.ndarray) -> np.ndarray:
         """I_j of y (length n), or of its first differences."""
@@ -451,7 +463,7 @@ class Periodogram:
         if not np.all(density > 0.0):
             return np.empty(0), math.inf
         w = self.group_weights
-        return w / density, float(dot(w, np.log(density)) + 0.5 * (self.m - 1) * _LOG_2PI)
+        return w / density, float(dot(w, np.log(density)) + self.degrees * _LOG_2PI)
 
     @staticmethod
     def weighted(power: np.ndarray, weights: tuple[np.ndarray, float]) -> float:

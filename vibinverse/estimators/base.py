@@ -94,6 +94,8 @@ def complete(result: FitResult, posterior: Posterior) -> FitResult:
     }
     if series.time_reference:
         data["time_reference"] = series.time_reference
+    if series.passband is not None:  # fitted below a logger's anti-alias roll-off (`Series.passband`)
+        data["passband_hz"] = float(series.passband)
     described = model.describe()
     if described is not None:
         data["model"] = dict(described)
@@ -110,7 +112,8 @@ def complete(result: FitResult, posterior: Posterior) -> FitResult:
         logger.debug("no residual checks: %s", exc)
     else:
         result.predictive["residual"] = residual
-        result.diagnostics["residual_checks"] = residual_checks(residual)
+        top = None if series.passband is None else series.passband * series.dt
+        result.diagnostics["residual_checks"] = residual_checks(residual, top)
     lines = {
         t.label: result.point[t.frequency]
         for t in model.line_tests(result.point, posterior.space.names)

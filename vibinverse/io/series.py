@@ -46,6 +46,9 @@ class Series:
     source: str
     scene: dict[str, Any] | None = None  # the true scene, when the file carries it (vibinverse simulate)
     notes: list[str] = field(default_factory=list)  # what the reader recorded: a time reference, units
+    #: the top (Hz) of the band where the record's spectrum is the process's: below a logger's
+    #: anti-alias roll-off (`vibinverse.spectrum.passband_top`); None: up to Nyquist
+    passband: float | None = None
 
     def __post_init__(self) -> None:
         """One value per stamp, both 1-D float arrays; else a one-line InputError naming the shapes."""
@@ -80,6 +83,11 @@ class Series:
     @property
     def fs(self) -> float:
         return 1.0 / self.dt
+
+    @property
+    def top(self) -> float:
+        """The highest frequency (Hz) a model of the record is fitted to: its `passband`, else Nyquist."""
+        return float(self.passband) if self.passband is not None else 0.5 * self.fs
 
     @property
     def time_reference(self) -> str | None:

@@ -106,7 +106,13 @@ def multi_series(
     for j in range(1, r):
         validate(time, z[:, j], source, None, notes)
     return MultiSeries(
-        first.time, first.intensity, first.source, None, list(first.notes), z.copy(), 0.5 * (cov + cov.T)
+        first.time,
+        first.intensity,
+        first.source,
+        None,
+        list(first.notes),
+        outputs=z.copy(),
+        covariance=0.5 * (cov + cov.T),
     )
 
 

@@ -40,7 +40,8 @@ from vibinverse.priors import Prior
 @dataclass(frozen=True)
 class DataFacts:
     """What a term's priors and starts read from the data: its standard deviation, span (s), median
-    step (s), Nyquist frequency (Hz), range, level and the stamps (s)."""
+    step (s), Nyquist frequency (Hz: the top of the band fitted, `Series.top`), range, level and
+    the stamps (s)."""
 
     sd: float
     span: float
@@ -61,7 +62,7 @@ class DataFacts:
             sd=float(np.nanstd(y)) or 1.0,
             span=max(float(t[-1] - t[0]), float(series.dt)),
             dt=float(series.dt),
-            nyquist=0.5 * float(series.fs),
+            nyquist=series.top,
             ymin=float(np.nanmin(y)),
             ymax=float(np.nanmax(y)),
             level=float(np.nanmean(y)),

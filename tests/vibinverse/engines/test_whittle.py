@@ -12,7 +12,8 @@ import pytest
 from vibinverse.engines.whittle import Periodogram, block_layout, fast_length, lines_sum, spectral_density
 from vibinverse.io.series import Series
 from vibinverse.kalman import oscillator_fill
-from vibinverse.models.modal import WHITTLE_MIN_SAMPLES, ModalModel
+from vibinverse.models import modal
+from vibinverse.models.modal import WHITTLE_MIN_SAMPLES, ModalModel, exact_affordable
 
 
 def tables(dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -291,3 +292,67 @@ def test_grouped_whittle_is_close_to_the_exact_one_where_peaks_span_many_groups(
         assert de < -5.0 and dg == pytest.approx(de, rel=0.05), name
     model.start_engine(1)
     assert model.log_likelihood(truth) == exact
+
+
+@pytest.mark.parametrize(("n", "top"), [(40_001, 0.41), (40_000, 0.5), (5_000, 0.1234)])
+def test_a_passband_keeps_the_ordinates_below_its_top(n, top):
+    """`top` (cycles per sample) keeps the ordinates j / m <= top: the record's transform and the
+    density on them are the whole band's first ones, and Whittle's ln L is the whole band's sum over
+    them (the Nyquist ordinate's half weight only when it is kept)."""
+    whole, band = Periodogram(n, 1), Periodogram(n, 1, top=top)
+    k = band.c.size
+    assert k == min(whole.c.size, math.floor(top * whole.m + 1e-9)) and np.all(band.c == whole.c[:k])
+    assert band.nyquist == (top == 0.5 and whole.nyquist)
+    y = np.cumsum(np.random.default_rng(n).standard_normal(n))
+    np.testing.assert_array_equal(band.transform(y), whole.transform(y)[:k])
+    phi, q, _, h, starts, sizes = tables(0.01)
+    f_whole = whole.density(phi, q, h, 0.3, starts, sizes)
+    f_band = band.density(phi, q, h, 0.3, starts, sizes)
+    np.testing.assert_allclose(f_band, f_whole[:k], rtol=1e-14)
+    power = whole.of(y)
+    w = whole.ordinate_weights[:k] if band.nyquist else np.ones(k)
+    direct = -float(np.sum(w * (np.log(f_whole[:k]) + power[:k] / f_whole[:k])) + w.sum() * math.log(2 * math.pi))
+    assert band.whittle(power[:k], f_band) == pytest.approx(direct, rel=1e-12)
+    with pytest.raises(ValueError, match="top"):
+        Periodogram(n, 1, top=0.6)
+
+
+def test_below_a_passband_the_filter_and_whittle_leave_out_the_same_ordinates():
+    """A record with a `passband`: the model runs Whittle's engine on the band (any length) and its
+    exact ln L is the filter's less Whittle's ln L of the ordinates above the top, which is the
+    whole band's Whittle ln L less the band's."""
+    rng = np.random.default_rng(5)
+    t = np.arange(8_000) * 0.1
+    y = np.cos(2 * np.pi * 1.3 * t) + rng.standard_normal(t.size) + 0.02 * np.cumsum(rng.standard_normal(t.size))
+    plain = Series(t, y, "plain")
+    banded = Series(t, y, "banded", passband=4.0)
+    spec = {"modes": 1, "lines": 1, "drift": True}
+    model = ModalModel({"modal": spec}, banded)
+    assert model.spectral is not None and model.spectral.c.size == math.floor(0.4 * model.spectral.m + 1e-9)
+    assert ModalModel({"modal": spec}, plain).spectral is None  # short: the filter's
+    values = model.guesses(model.default_priors())[0]
+    whole = ModalModel({"modal": spec}, plain)
+    whole.spectral = Periodogram(t.size, 1)  # Whittle's on every ordinate
+    above = model.above_passband(values)
+    assert above == pytest.approx(whole.log_likelihood(values) - model.log_likelihood(values), rel=1e-10)
+    kalman = ModalModel({"modal": spec}, plain)._run(values, np.empty(0), np.empty(0))
+    assert model.exact_log_likelihood(values) == pytest.approx(kalman - above, rel=1e-12)
+    assert ModalModel({"modal": spec}, plain).above_passband(values) == 0.0
+
+
+def test_the_fit_after_the_search_runs_the_filter_where_it_is_affordable():
+    """`exact_affordable`: a long record's model (Whittle's engine) is fitted by the filter when its
+    fit's filter runs would take EXACT_FIT_SECONDS or less (40,000 samples, one mode: milliseconds a
+    run), not beyond (the allowance cut to a microsecond); `use_filter` turns Whittle's engine off
+    for good (a restart of the engine keeps it off), and the likelihood is the filter's."""
+    series = long_record(4)
+    model = ModalModel({"modal": {"modes": 1, "drift": True}}, series)
+    values = dict(LONG_TRUTH)
+    assert model.spectral is not None and exact_affordable(model, values)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(modal, "EXACT_FIT_SECONDS", 1e-6)
+        assert not exact_affordable(model, values)
+    model.use_filter()
+    model.start_engine()
+    assert model.spectral is None and not exact_affordable(model, values)
+    assert model.log_likelihood(values) == model.exact_log_likelihood(values)
