@@ -23,6 +23,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import logging
 import math
 import warnings
 from collections.abc import Callable
@@ -46,6 +47,8 @@ from vibinverse.verdict import (
     verdict,
 )
 
+logger = logging.getLogger(__name__)
+
 
 def _text(v: Any) -> str:
     """Any value as escaped HTML text."""
@@ -66,7 +69,13 @@ def _png(fig) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
-def _drawn_elsewhere(render: Callable[[], str]) -> Callable[[], str]:
+#: seconds the report waits for a figure drawn in a forked process before drawing it itself: a fork
+#: taken while another thread held a lock (a browser driver's, a BLAS pool's) can leave the child
+#: stuck for good; CI's report tests once waited 6 minutes on two such children
+FIGURE_WAIT = 60.0
+
+
+def drawn_elsewhere(render: Callable[[], str]) -> Callable[[], str]:
     """Start `render` (a figure to a PNG data URI) in a forked process and return the function that
     waits for its result, so that the other figures are drawn meanwhile on the other core (the
     corner plot alone is a third of a report's time). Where fork is unavailable, or the child
@@ -89,8 +98,13 @@ def _drawn_elsewhere(render: Callable[[], str]) -> Callable[[], str]:
     send.close()
 
     def result() -> str:
+        value = None
         try:
-            value = receive.recv()
+            if receive.poll(FIGURE_WAIT):
+                value = receive.recv()
+            else:  # a child that hangs (a lock another thread held at the fork): drawn here
+                logger.warning("a figure's drawing process gave nothing in %g s; drawing it here", FIGURE_WAIT)
+                proc.kill()
         except EOFError:
             value = None
         finally:
@@ -553,7 +567,7 @@ def _parameter_labels(summary: dict, names: list[str]) -> list[str]:
 
 
 def _corner(summary: dict, idata: Any, safe: dict, names: list[str]) -> Callable[[], str] | None:
-    """The corner plot of the posterior draws, started in the background (`_drawn_elsewhere`):
+    """The corner plot of the posterior draws, started in the background (`drawn_elsewhere`):
     the function that returns its PNG, or None when there are too few draws."""
     draws = _draws(idata, "posterior", safe, names)
     if draws is None or draws.shape[0] <= draws.shape[1]:
@@ -574,7 +588,7 @@ def _corner(summary: dict, idata: Any, safe: dict, names: list[str]) -> Callable
             )
         return _png(fig)
 
-    return _drawn_elsewhere(render)
+    return drawn_elsewhere(render)
 
 
 def _source_index(key: str) -> int:
