@@ -65,11 +65,12 @@ def test_video_fps_sets_the_nominal_rate_of_a_slow_motion_file(tmp_path, capsys)
         capsys, "simulate", FRAME, *VIEW, "--image", "4,4", "--video", "--video-fps", "30", "-o", str(out)
     )
     assert doc["video_fps"] == 30.0 and doc["fs"] == 200.0
-    with av.open(str(out / "video.mp4")) as c:
+    with av.open(str(out / "video.mp4")) as c:  # a stream's properties only while its container is open
         stream = c.streams.video[0]
+        rate = stream.average_rate
         stamps = [f.pts * f.time_base for f in c.decode(stream)]
         comment = json.loads(c.metadata["comment"])
-    assert stream.average_rate == 30 and stamps == [Fraction(i, 30) for i in range(100)]
+    assert rate == 30 and stamps == [Fraction(i, 30) for i in range(100)]
     assert comment["capture_fps"] == 200.0 and comment["fps"] == 30.0
     assert {p.name for p in out.iterdir()} == {"cube.nc", "video.mp4"}
 
