@@ -69,10 +69,11 @@ def _png(fig) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
-#: seconds the report waits for a figure drawn in a forked process before drawing it itself: a fork
-#: taken while another thread held a lock (a browser driver's, a BLAS pool's) can leave the child
-#: stuck for good; CI's report tests once waited 6 minutes on two such children
-FIGURE_WAIT = 60.0
+#: seconds the report waits for a figure drawn in a forked process before drawing it itself (a slow
+#: child's work is then done twice, never lost): a fork taken while another thread held a lock (a
+#: browser driver's, a BLAS pool's) can leave the child stuck for good; CI's report tests once waited
+#: 6 minutes on two such children. A corner plot takes a few seconds.
+FIGURE_WAIT = 20.0
 
 
 def drawn_elsewhere(render: Callable[[], str]) -> Callable[[], str]:
