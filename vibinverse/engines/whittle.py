@@ -345,7 +345,6 @@ class Periodogram:
         count = self.m // 2
         if top is not None:  # the ordinates at or below `top` cycles per sample (at least one)
             count = max(1, min(count, math.floor(top * self.m + 1e-9)))
-        self.top = top
         j = np.arange(1, count + 1)
         w = 2.0 * np.pi * j / self.m
         self.cw, self.sw = np.cos(w), np.sin(w)
