@@ -126,7 +126,9 @@ def fit(
     -> emcee, each seeding the next; the modal model, and records of over 20,000 samples, by
     importance sampling of the Laplace approximation in place of emcee, emcee where its check fails).
     `chain` is the emcee checkpoint (HDF5; `resume` continues it); without it the sampler
-    checkpoints to a temporary file that is removed afterwards.
+    checkpoints to a temporary file that is removed afterwards. `workers`: the sampler's threads
+    (or processes, for a likelihood that holds the GIL) and the modal order search's threads (the
+    same numbers on any count).
 
     Without a scene (or with a `{"modal": {"modes": 2, ...}}` table) the series is fitted with the
     modal model: resonances, lines, drift and coloured noise, the order not fixed by the table

@@ -63,13 +63,16 @@ def _is_modal(scene: SceneLike | None, model: str | None) -> bool:
     return scene is None or model == ModalModel.name or (isinstance(scene, Mapping) and "modal" in scene)
 
 
-def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]) -> tuple[dict[str, Any], Any]:
+def _modal_table(
+    data: Series, scene: SceneLike | None, overrides: Sequence[str], workers: int = 1
+) -> tuple[dict[str, Any], Any]:
     """The modal table to fit and the order search behind it (None when the table fixes the whole
     order): `modes`, `lines`, `drift` and `noise` given in the table are kept, the others chosen
     by `vibinverse.model_order.choose_order` (stepwise BIC), whose optimum seeds the fit. A whole
     order of modes and lines fixed without a `start` is seeded by `model_order.fit_fixed` (its
     modes and lines also built up one at a time, as the search would); free decays without an
-    `onset` get the likeliest (`model_order.set_onset`), written into the table."""
+    `onset` get the likeliest (`model_order.set_onset`), written into the table. `workers`: the
+    search's threads."""
     from vibinverse.model_order import SEARCHED, choose_order, fit_fixed
 
     table = {"modal": {}} if scene is None else scene_table(scene, overrides)
@@ -89,7 +92,7 @@ def _modal_table(data: Series, scene: SceneLike | None, overrides: Sequence[str]
                 if spec.decays:
                     modal["onset"] = seeded.spec.onset
             return table, None
-        order = choose_order(data, table)
+        order = choose_order(data, table, workers=workers)
     chosen = order.table()["modal"]
     table["modal"] = {**chosen, **{k: v for k, v in modal.items() if k in ("values",)}}
     if "windows" in modal:  # the user's line windows first (`ModalModel.line_window` takes the first holding a line)
@@ -155,11 +158,13 @@ def build_posterior(
     model: str | None,
     overrides: Sequence[str],
     nuisance: Mapping[str, Any] | None = None,
+    workers: int = 1,
 ) -> tuple[Posterior, Any, bool]:
     """(posterior, the search that chose the model's parts or None, whether the model is the modal
     model): the modal model's order search (`vibinverse.model_order`), or for a scene whose model
     takes nuisance terms the search of those the table leaves open
-    (`vibinverse.selection.nuisance_search`). `nuisance` fixes nuisance terms (`with_nuisance`)."""
+    (`vibinverse.selection.nuisance_search`). `nuisance` fixes nuisance terms (`with_nuisance`).
+    `workers`: the modal order search's threads."""
     from vibinverse.models.modal import ModalModel
 
     data = as_series(series)
@@ -169,7 +174,7 @@ def build_posterior(
         scene, overrides = with_nuisance(scene, overrides, nuisance, modal), ()
     if modal:
         data = with_passband(data)
-        table, order = _modal_table(data, scene, overrides)
+        table, order = _modal_table(data, scene, overrides, workers)
         model = ModalModel.name
     else:
         table = scene_table(scene, overrides)
@@ -269,7 +274,7 @@ def fit_series(
         raise InputError("workers and max_steps: must be >= 1")
     if resume and chain is None:
         raise InputError("resume: needs the chain (checkpoint) file of the run to continue")
-    post, order, modal = build_posterior(series, scene, free, model, overrides, nuisance)
+    post, order, modal = build_posterior(series, scene, free, model, overrides, nuisance, workers)
     with scene_errors(), tempfile.TemporaryDirectory(prefix="vibinverse-") as tmp:
         result = run(
             post,

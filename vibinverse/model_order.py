@@ -139,6 +139,7 @@ from vibinverse.models.modal import (
     wrap_phase,
 )
 from vibinverse.optimize import maximize, maximize_near
+from vibinverse.parallel import thread_map
 from vibinverse.priors import ParameterSpace
 from vibinverse.terms.decay import envelope_decay, excitation_onset, ring_start
 from vibinverse.terms.drift import RandomWalk
@@ -1310,10 +1311,12 @@ def choose_order(
     max_modes: int = MAX_MODES,
     max_lines: int = MAX_LINES,
     max_steps: int = 20,
+    workers: int = 1,
 ) -> OrderResult:
     """Choose the modal model's order for `series` by stepwise BIC selection (module docstring).
     `table`: a `{"modal": {...}}` table whose `modes`, `lines`, `drift`, `noise` are fixed (not
-    searched); None searches all. Returns the chosen fit and the criterion table."""
+    searched); None searches all. `workers`: threads for each step's candidates (`_best_move`).
+    Returns the chosen fit and the criterion table."""
     t0 = time.perf_counter()
     fixed = dict((table or {}).get("modal") or {})
     spec = ModalSpec.from_table({"modal": {k: fixed[k] for k in (*SEARCHED, "white", "decays", "onset") if k in fixed}})
@@ -1333,9 +1336,9 @@ def choose_order(
     step = 1
     while step <= max_steps:
         cands = candidates(current, series, search, (max_modes, max_lines), lowest)
-        best = _best_move(series, current, cands, rows, step)
+        best = _best_move(series, current, cands, rows, step, workers)
         if best is None:  # nothing to add: remove or exchange a component
-            best = _best_move(series, current, neighbours(current, series, search), rows, step)
+            best = _best_move(series, current, neighbours(current, series, search), rows, step, workers)
         if best is None:  # nothing lowers the BIC: does each slow line stand as a line?
             best = settle_slow(series, current, search, rows, step)
             lowest = FEW_CYCLES
@@ -1494,36 +1497,46 @@ def partial_fit(series: Series, current: OrderFit, c: Candidate) -> OrderFit:
 
 
 def _best_move(
-    series: Series, current: OrderFit, cands: list[Candidate], rows: list[dict[str, Any]], step: int
+    series: Series,
+    current: OrderFit,
+    cands: list[Candidate],
+    rows: list[dict[str, Any]],
+    step: int,
+    workers: int = 1,
 ) -> OrderFit | None:
     """The best of the candidate orders (partial fits, then full refits of the best REFIT_TOP),
-    when it lowers the BIC; every candidate recorded in `rows`."""
+    when it lowers the BIC; every candidate recorded in `rows`. The candidates' screens, partial
+    fits and refits are independent: `workers` threads run them (`vibinverse.parallel`), the same
+    numbers as one."""
     if not cands:
         return None
-    partial = []
-    for c in cands:
-        if len(c.starts) > 2:  # a nuisance term's grid: screened first
-            c, gain = screen(series, current, c)
-            if not gain > 0:
-                f = OrderFit(
-                    c.spec,
-                    current.model,
-                    c.starts[0],
-                    current.log_likelihood + gain,
-                    current.k + len(c.new),
-                    current.n,
-                    current.windows,
-                )
-                rows.append(_row(step, c.what, f, current.bic, "screened out (no gain on its grid of starts)", False))
-                continue
-        partial.append((c, partial_fit(series, current, c)))
-    partial.sort(key=lambda cp: cp[1].bic)
+
+    def screened(c: Candidate) -> tuple[Candidate, float | None]:
+        # a nuisance term's grid: screened first
+        return screen(series, current, c) if len(c.starts) > 2 else (c, None)
+
+    kept_cands = []
+    for c, gain in thread_map(screened, cands, workers):
+        if gain is not None and not gain > 0:
+            f = OrderFit(
+                c.spec,
+                current.model,
+                c.starts[0],
+                current.log_likelihood + gain,
+                current.k + len(c.new),
+                current.n,
+                current.windows,
+            )
+            rows.append(_row(step, c.what, f, current.bic, "screened out (no gain on its grid of starts)", False))
+            continue
+        kept_cands.append(c)
+    fits = thread_map(lambda c: partial_fit(series, current, c), kept_cands, workers)
+    partial = sorted(zip(kept_cands, fits), key=lambda cp: cp[1].bic)
     slack = 0.5 * math.log(current.n)  # a partial fit this close to a lower BIC may get there refitted
-    refits = []
-    for c, pf in partial[:REFIT_TOP]:
-        if pf.bic < current.bic + slack:
-            # the partial fit's drift rate is the filter's (`drift_by_filter`), or the current's, set so too
-            refits.append((c, fit_order(series, c.spec, [pf.values], windows=current.windows, drift_set=True)))
+    near = [(c, pf) for c, pf in partial[:REFIT_TOP] if pf.bic < current.bic + slack]
+    # the partial fit's drift rate is the filter's (`drift_by_filter`), or the current's, set so too
+    refit = lambda cp: fit_order(series, cp[0].spec, [cp[1].values], windows=current.windows, drift_set=True)
+    refits = list(zip((c for c, _ in near), thread_map(refit, near, workers)))
     best = min(refits, key=lambda cf: cf[1].bic, default=None)
     kept = best is not None and best[1].bic < current.bic
     refitted = {id(c): f for c, f in refits}

@@ -253,7 +253,8 @@ def table(result: dict[str, Any]) -> str:
             continue
         stages = ", ".join(f"{k} {v:.1f} s" for k, v in long["timing"].items() if isinstance(v, (int, float)))
         out.append(
-            f"default fit of {what}, {long['samples']} samples: {long['wall_s']:.1f} s "
+            f"default fit of {what}, {long['samples']} samples, {long.get('workers', 1)} thread(s): "
+            f"{long['wall_s']:.1f} s "
             f"(goal <= {long['goal_s']:.0f} s; {stages}); {long['modes_found']} modes, largest frequency error "
             f"{fmt(long['max_frequency_error'], '.1e')}, intervals hold the truth: {long['intervals_hold_truth']}, "
             f"posterior by {long['approximation']}"

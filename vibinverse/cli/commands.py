@@ -847,7 +847,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--workers",
         type=ranges.workers,
         default=1,
-        help="the sampler's workers: threads where the likelihood releases the GIL (frame, modal), else processes",
+        help="the sampler's workers: threads where the likelihood releases the GIL (frame, modal), else "
+        "processes; also the modal order search's threads (each step's candidates)",
     )
     fit.add_argument(
         "--max-steps", type=ranges.max_steps, default=20000, help=f"cap on MCMC steps, in [1, {ranges.MAX_STEPS}]"

@@ -171,7 +171,9 @@ def pointwise(posterior: Posterior, chains: np.ndarray, seed: int = 0) -> dict[s
 
 
 def predictive(posterior: Posterior, values: dict[str, float], draws: np.ndarray | None) -> dict[str, np.ndarray]:
-    """The model mean at the point estimate and its 5-95 % band over up to 100 draws."""
+    """The model mean at the point estimate and its 5-95 % band over up to 100 draws (one
+    percentile when every draw's mean is constant in time: on an hour at 200 Hz the band's
+    percentiles over 100 x 720,000 values cost 1.5 s a call)."""
     model = posterior.model
     out = {"model_mean": model.mean(values)}
     if draws is not None and len(draws):
@@ -183,6 +185,10 @@ def predictive(posterior: Posterior, values: dict[str, float], draws: np.ndarray
         for i, d in enumerate(pick[1:], start=1):
             curves[i] = model.mean(dict(zip(posterior.space.names, d)))
         q05, q95 = np.empty(first.size), np.empty(first.size)
+        if np.all(curves == curves[:, :1]):  # each draw's mean one value (a level, no lines): one percentile
+            q05[:], q95[:] = np.percentile(curves[:, 0], [5, 95])
+            out["model_q05"], out["model_q95"] = q05, q95
+            return out
         for a in range(0, first.size, PERCENTILE_COLUMNS):  # np.percentile copies: a slice at a time
             q05[a : a + PERCENTILE_COLUMNS], q95[a : a + PERCENTILE_COLUMNS] = np.percentile(
                 curves[:, a : a + PERCENTILE_COLUMNS], [5, 95], axis=0

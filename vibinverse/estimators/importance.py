@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import logging
 import math
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -38,6 +37,7 @@ from vibinverse.errors import Unsupported
 from vibinverse.estimators.base import Estimator, base_result, register_estimator
 from vibinverse.estimators.mcmc import ESS_MIN, split_laplace
 from vibinverse.inference_data import psislw
+from vibinverse.parallel import thread_map
 from vibinverse.posterior import Posterior
 from vibinverse.result import FitResult
 
@@ -64,10 +64,8 @@ def psis_weights(log_w: np.ndarray) -> tuple[float, np.ndarray, float]:
 
 def log_posteriors(posterior: Posterior, zs: np.ndarray, workers: int = 1) -> np.ndarray:
     """The log posterior at each row of zs; `workers` threads where the model releases the GIL."""
-    if workers > 1 and posterior.model.releases_gil:
-        with ThreadPoolExecutor(workers, thread_name_prefix="vibinverse-importance") as pool:
-            return np.array(list(pool.map(posterior.log_posterior, zs)))
-    return np.array([posterior.log_posterior(z) for z in zs])
+    threads = workers if posterior.model.releases_gil else 1
+    return np.array(thread_map(posterior.log_posterior, zs, threads, "vibinverse-importance"))
 
 
 def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
