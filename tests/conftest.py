@@ -295,6 +295,34 @@ def unbounded_result():
 BUILDING_MODES = ((1.92, 0.012, 1.0), (2.31, 0.015, 0.7), (2.68, 0.010, 0.5))
 
 
+def building_record(seed: int, seconds: float, fs: float = 10.0, white: float = 0.095) -> Series:
+    """A building's ambient record at `fs`: the three modes of `BUILDING_MODES`, each an oscillator
+    driven by continuous white noise, propagated by its exact discretization (Van Loan: scipy's
+    matrix exponential) from its stationary law, plus white noise `white`; no drift."""
+    from scipy.linalg import expm
+
+    rng = np.random.default_rng(seed)
+    n = round(seconds * fs)
+    y = white * rng.standard_normal(n)
+    for f, zeta, rms in BUILDING_MODES:
+        w = 2.0 * np.pi * f
+        a = np.array([[0.0, 1.0], [-w * w, -2.0 * zeta * w]])
+        m = np.zeros((4, 4))
+        m[:2, :2], m[:2, 2:], m[2:, 2:] = -a, np.diag([0.0, 4.0 * zeta * w**3 * rms**2]), a.T
+        e = expm(m / fs)
+        phi = e[2:, 2:].T
+        q = phi @ e[:2, 2:]
+        z = rng.standard_normal((n, 2)) @ np.linalg.cholesky(0.5 * (q + q.T)).T
+        x = np.array([rms * rng.standard_normal(), w * rms * rng.standard_normal()])
+        out = np.empty(n)
+        for k in range(n):
+            if k:
+                x = phi @ x + z[k]
+            out[k] = x[0]
+        y += out
+    return Series(np.arange(n) / fs, y, f"building (seed {seed})")
+
+
 def decimated_building(seed: int, seconds: float, ftype: str = "iir") -> Series:
     """A logger's building record: three modes (`BUILDING_MODES`, each an oscillator driven by
     white noise, simulated at 100 Hz by its exact zero-order-hold discretization), white noise of

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import copy
 import logging
-import math
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -187,14 +186,6 @@ def build_posterior(
                 table["nuisance"] = {**(table.get("nuisance") or {}), **order.table()}
     with scene_errors():
         sm = build_model(table, data, model)
-        if modal:
-            from vibinverse.models.modal import exact_affordable
-
-            start = {n: sm.value({}, n) for n in sm.spec.names()}
-            if not all(math.isfinite(v) for v in start.values()):
-                start = sm.guesses(sm.default_priors())[0]
-            if exact_affordable(sm, start):  # the search's Whittle, the fit's filter
-                sm.use_filter()
         for k in sm.unused_windows() if modal else []:
             lo, hi = sm.windows[k]
             logger.warning(

@@ -430,8 +430,8 @@ def drift_by_filter(
 ) -> tuple[dict[str, float], float]:
     """An optimum of Whittle's likelihood with its drift's rate (when in `free`) set by the Kalman
     filter's exact ln L, the rest held, and that ln L. Why: Whittle's engine works on the
-    differences, where a walk's level path is hidden under the end-to-end jump's share of the low
-    ordinates (`Periodogram.density`: 2 v / m, as large as the walk's own increments), so it
+    differences, where a walk's level path is hidden under the end-to-end jump at the low
+    ordinates (`shared_jump`: 2 v / m of each ordinate's power, as large as the walk's own increments), so it
     cannot set the rate: on an hour at 200 Hz with a quadratic + random-walk drift the filter puts
     3 modes and a walk of rate 0.01 32,000 in ln L above the same modes without it, where Whittle's
     says the walk loses 300 (the search took two modes of one cycle per record for the trend). A

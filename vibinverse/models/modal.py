@@ -79,7 +79,6 @@ import copy
 import functools
 import math
 import threading
-import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -93,6 +92,7 @@ from vibinverse.engines.whittle import (
     level_term,
     level_window,
     lines_sum,
+    shared_jump,
     walk_step_variance,
 )
 from vibinverse.errors import SceneError, Unsupported
@@ -126,15 +126,6 @@ from vibinverse.terms.resonance import Oscillator
 #: likelihood (`vibinverse.engines.whittle`; `ModalModel.spectral`), 10x cheaper per call than the
 #: Kalman filter there and within a few percent of its interval widths (tests/vibinverse/engines/test_whittle.py)
 WHITTLE_MIN_SAMPLES = 20_000
-#: the fit after the order search (MAP, Laplace, importance sampling) runs the filter's exact
-#: likelihood where its ~4 k^2 + 4,000 filter runs would take at most this many seconds
-#: (`exact_affordable`), Whittle's beyond: on 40 min 10 Hz records of three modes (24,000 samples,
-#: 1.2 ms a filter run against Whittle's 0.06 ms) Whittle's intervals of the strongest mode's
-#: damping ratio held the truth in 12 of 30 data sets (its estimates' spread twice the intervals'
-#: sd), the filter's in 0.96 of 25
-EXACT_FIT_SECONDS = 15.0
-#: the filter runs `exact_affordable` counts for k parameters: 4 k^2 + EXACT_FIT_RUNS
-EXACT_FIT_RUNS = 4000
 #: a mode or line this close to a component whose detection test removes it (Fourier bins, plus
 #: half-power half-widths of either) is refitted first with the null (`near_parameters`)
 NEAR_REACH_BINS, NEAR_REACH_WIDTHS = 20.0, 5.0
@@ -362,51 +353,41 @@ def _lines_mean(t, level, f, a, ph, out):  # pragma: no cover - compiled
         out[k] = acc
 
 
-def whittle_engine(series: Series, gaps: bool, gain: bool, integrated: bool, bins: int = 1) -> Periodogram | None:
-    """Whittle's engine (on the record's first differences) for a long record without gaps whose
+def whittle_engine(
+    series: Series, gaps: bool, gain: bool, integrated: bool, bins: int = 1, drifting: bool = True
+) -> Periodogram | None:
+    """Whittle's engine for a long record without gaps whose
     steps are steady (`steady`: read on the regular grid from its first to its last stamp), for a
     model without a gain drift or an integrated walk; None: the Kalman filter's exact likelihood.
     Long: at least `WHITTLE_MIN_SAMPLES` samples, or any length below a logger's anti-alias roll-off
     (`Series.passband`: the filter sees the whole band, and its ln L less the ordinates above the
     top, `ModalModel.above_passband`, misled the search of a 20 min record into five modes and
     free decays in 15 minutes; Whittle's on the band found the three in seconds). `bins` > 1: the
-    ordinates grouped (`Periodogram`)."""
+    ordinates grouped (`Periodogram`).
+
+    On the record's first differences for a model with a drift (a walk has no periodogram), on the
+    record itself without one. Why not always the differences: their transform at every ordinate is
+    (1 - e^{-iw}) Y_j + (y_m - y_0), the stationary part's end-to-end jump, one random number shared
+    by all ordinates; Whittle's likelihood counts it as independent noise in each, weighted most
+    where the differenced density is low. On 40 min 10 Hz records of three modes (simulated exactly,
+    white noise, no drift) the differences' estimates of the strongest mode's damping ratio spread
+    four times the intervals' sd (two of 30 at a quarter and a half of the truth) and its intervals held the
+    truth in 12 of 30; the record's periodogram's in 27 of 30, all three modes' damping ratios in
+    0.89 +- 0.03 (90 intervals), as with the Kalman filter's exact likelihood (0.90 +- 0.03)."""
     short = series.time.size < WHITTLE_MIN_SAMPLES and series.passband is None
     if gaps or gain or integrated or short or not steady(series.time):
         return None
     top = None if series.passband is None else min(0.5, series.passband * series.dt)
-    return periodogram(series.time.size, bins, top)
+    return periodogram(series.time.size, bins, top, 1 if drifting else 0)
 
 
-def exact_affordable(model: ModalModel, values: dict[str, float]) -> bool:
-    """Whether the fit after the order search should run the filter's exact likelihood in place of
-    the Whittle engine the model uses: on uniform stamps, where one filter run at `values` (the
-    faster of two, timed) times the fit's 4 k^2 + EXACT_FIT_RUNS runs (the Laplace Hessian's, the
-    MAP's and the importance sampler's) is within EXACT_FIT_SECONDS. Timed, because a run's cost is
-    not the samples' count alone: it ends once the gain is held, which a lightly damped or noise-free
-    record reaches late (a 2 s plate record of 51,200 samples: 15 ms a run, a 40 min building record
-    of 24,000: 1.2 ms). Below a `passband` the likelihood is the filter's less Whittle's ln L above
-    the top (`above_passband`): on 40 min decimated building records its damping intervals held the
-    truth in 0.92 +- 0.04 (16 data sets, 48 intervals), Whittle's on the band in 0.78 +- 0.04 (the
-    strongest mode's in 0.53)."""
-    if model.spectral is None or not model.series.uniform:
-        return False
-    runs = []
-    for _ in range(2):
-        start = time.perf_counter()
-        model.exact_log_likelihood(values)
-        runs.append(time.perf_counter() - start)
-    k = len(model.spec.names())
-    return min(runs) * (4 * k * k + EXACT_FIT_RUNS) <= EXACT_FIT_SECONDS
-
-
-@functools.lru_cache(maxsize=4)
-def periodogram(n: int, bins: int, top: float | None = None) -> Periodogram:
-    """The differences' `Periodogram` of a record of n samples (its ordinates grouped `bins` at a
-    time, those above `top` cycles per sample left out: a logger's anti-alias roll-off), shared:
+@functools.lru_cache(maxsize=8)
+def periodogram(n: int, bins: int, top: float | None = None, differences: int = 1) -> Periodogram:
+    """The `Periodogram` of a record of n samples or of its differences (its ordinates grouped
+    `bins` at a time, those above `top` cycles per sample left out: a logger's anti-alias roll-off), shared:
     the order search builds dozens of models of one record (14 ms each at 720,000 samples), and a
     periodogram is never changed after it is made."""
-    return Periodogram(n, 1, bins, top)
+    return Periodogram(n, differences, bins, top)
 
 
 def wrap_phase(phase: float) -> float:
@@ -628,7 +609,6 @@ class ModalModel(SignalModel):
         self._start = {k: float(v) for k, v in (self.base["modal"].get("start") or {}).items()}
         self.windows = line_windows(self.base["modal"].get("windows"))
         self._base_values: dict[str, float] | None = None
-        self.filter_only = False  # `use_filter`
         self.start_engine()
 
     def start_engine(self, bins: int = 1) -> None:
@@ -638,16 +618,18 @@ class ModalModel(SignalModel):
         # a free decay is not stationary: the filter's engine only
         self.spectral = (
             None
-            if self.spec.decays or self.filter_only
+            if self.spec.decays
             else whittle_engine(
                 self.series,
                 not bool(self.good.all()),
                 bool(self.spec.gain),
                 bool(np.any(self.kinds == INTEGRATED_WALK_FORM)),
                 bins,
+                self.spec.drifting,
             )
         )
         self._power: np.ndarray | None = None
+        self._rotated: np.ndarray | None = None
         self._transform: np.ndarray | None = None
         self._full_transform: np.ndarray | None = None  # `above_passband`'s
         # the last lines' periodogram and the last density (with f(0) and the walk's step), each with
@@ -657,12 +639,6 @@ class ModalModel(SignalModel):
         self._density: tuple[bytes, tuple[tuple[np.ndarray, float], float, float]] | None = None
         self._level_window: int | None = None
         self._leading: tuple[int, float] | None = None
-
-    def use_filter(self) -> None:
-        """The Kalman filter's exact likelihood from now on, whatever the record's length (Whittle's
-        engine off: `exact_affordable`)."""
-        self.filter_only = True
-        self.start_engine()
 
     def onset_sample(self, onset: float | None) -> int:
         """The sample of a free decay's onset `onset` (s after the first stamp: the first at or after
@@ -896,8 +872,9 @@ class ModalModel(SignalModel):
         if self.series.passband is None:
             return 0.0
         n = self.t.size
-        full = periodogram(n, 1)
-        kept = periodogram(n, 1, min(0.5, self.series.passband * self.series.dt)).c.size
+        diff = 1 if self.spec.drifting else 0  # as the band's engine (`whittle_engine`)
+        full = periodogram(n, 1, None, diff)
+        kept = periodogram(n, 1, min(0.5, self.series.passband * self.series.dt), diff).c.size
         if self._full_transform is None:
             self._full_transform = full.transform(self.y)
         rest = self._full_transform
@@ -908,11 +885,16 @@ class ModalModel(SignalModel):
                     rest -= full.line_transform(float(theta), float(psi), float(amp))
         _, phis, qs, r, p0 = self.tables(values, with_mean=False)
         v0 = float(self.h @ p0 @ self.h) + r
-        density = full.density(phis[0], qs[0], self.h, r, self.block_starts, self.block_sizes, stationary_variance=v0)
-        density, power, weights = density[kept:], full.power(rest)[kept:], full.ordinate_weights[kept:]
+        density = full.density(phis[0], qs[0], self.h, r, self.block_starts, self.block_sizes)
         if not np.all(density > 0.0):
             return math.inf
-        return -float(dot(weights, np.log(density) + power / density) + weights.sum() * _LOG_2PI)
+        w = full.ordinate_weights
+        above = -float(dot(w[kept:], np.log(density[kept:]) + full.power(rest)[kept:] / density[kept:]))
+        above -= float(w[kept:].sum()) * _LOG_2PI
+        if diff:  # the end-to-end jump's shared term of the whole band less the band's (`shared_jump`)
+            inverse, x, tau2 = w / density, full.rotated(rest), 2.0 * v0 / full.m
+            above += shared_jump(inverse, x, tau2)[0] - shared_jump(inverse[:kept], x[:kept], tau2)[0]
+        return above
 
     def exact_log_likelihood(self, values: dict[str, float]) -> float:
         """The Kalman filter's exact log-likelihood (less the ordinates above a `passband`:
@@ -940,19 +922,30 @@ class ModalModel(SignalModel):
                 return False
         return True
 
-    def _whittle(self, values: dict[str, float]) -> float:
-        """Whittle's log-likelihood of the record's differences (`vibinverse.engines.whittle`) and
-        the level's share (`level_term`: the mean residual of the leading samples that carry it)."""
-        _, phis, qs, r, p0 = self.tables(values, with_mean=False)
-        if self.spec.lines:  # the record's transform once, the lines' in closed form (`_rest_without_lines`)
+    def _spectra(self, values: dict[str, float]) -> tuple[np.ndarray | None, np.ndarray, np.ndarray | None]:
+        """(the transform less the lines, or None without lines; its periodogram; its `rotated`
+        part, None on the record's own periodogram), each reduced to the engine's groups but the
+        transform: the record's once, the lines' in closed form (`_rest_without_lines`)."""
+        sp = self.spectral
+        if self.spec.lines:
             if self._transform is None:
-                self._transform = self.spectral.transform(self.y)
+                self._transform = sp.transform(self.y)
+            rest, power = self._rest_without_lines(*self._line_phasors(values))
+            return rest, power, sp.reduce(sp.rotated(rest)) if sp.differences else None
+        if self._power is None:  # a constant mean: computed once
+            spec = sp.transform(self.y)
+            self._power = sp.reduce(sp.power(spec))
+            self._rotated = sp.reduce(sp.rotated(spec)) if sp.differences else None
+        return None, self._power, self._rotated
+
+    def _whittle(self, values: dict[str, float]) -> float:
+        """Whittle's log-likelihood of the record, or of its differences with the end-to-end jump's
+        shared term (`vibinverse.engines.whittle.shared_jump`), and the level's share
+        (`level_term`: the mean residual of the leading samples that carry it)."""
+        _, phis, qs, r, p0 = self.tables(values, with_mean=False)
+        _, power, rotated = self._spectra(values)
+        if self.spec.lines:
             theta, psi, amp = self._line_phasors(values)
-            power = self._rest_without_lines(theta, psi, amp)[1]
-        else:  # a constant mean: the differences' periodogram is the record's, computed once
-            if self._power is None:
-                self._power = self.spectral.reduce(self.spectral.of(self.y))
-            power = self._power
         blocks = (self.block_starts, self.block_sizes)
         v0 = float(self.h @ p0 @ self.h) + r  # the stationary part's variance (the walk's P0 is 0)
         key = np.concatenate((phis[0].ravel(), qs[0].ravel(), (r, v0))).tobytes()
@@ -960,12 +953,14 @@ class ModalModel(SignalModel):
         if cached is not None and cached[0] == key:
             weights, f0, q = cached[1]
         else:
-            density = self.spectral.density(phis[0], qs[0], self.h, r, *blocks, stationary_variance=v0)
+            density = self.spectral.density(phis[0], qs[0], self.h, r, *blocks)
             weights = self.spectral.weights(density)
             f0 = self.spectral.zero_density(phis[0], qs[0], self.h, r, *blocks)
             q = walk_step_variance(phis[0], qs[0], self.h, *blocks)
             self._density = (key, (weights, f0, q))
         ll = self.spectral.weighted(power, weights)
+        if rotated is not None and math.isfinite(ll):
+            ll += shared_jump(weights[0], rotated, 2.0 * v0 / self.spectral.m)[0]
         if self._level_window is None:  # fixed at the first values seen: the likelihood stays smooth
             self._level_window = level_window(f0, q, self.t.size)
         k = self._level_window
@@ -987,7 +982,8 @@ class ModalModel(SignalModel):
         shared by its parameters) and dI_j = 2 Re(X_j* dX_j) / m in a line's frequency, amplitude and
         phase (`Periodogram.line_gradient`, one pass per line). Still forward steps of 1e-7 of the
         value's scale: the small tables' entries in a state parameter (its own term's blocks refilled
-        alone, `_term_tables`), r and the end-to-end share, and the level term."""
+        alone, `_term_tables`), r and the stationary variance (the end-to-end jump's term), and the
+        level term. The jump's term (`shared_jump`) adds to each group's slope and to the lines'."""
         if self.spectral is None:
             raise Unsupported("the gradient is of Whittle's likelihood (a long steady record)")
         sp, h = self.spectral, self.h
@@ -995,21 +991,21 @@ class ModalModel(SignalModel):
         names = list(self._names) if names is None else list(names)
         _, phis, qs, r, p0 = self.tables(values, with_mean=False)
         phi, q, p0 = phis[0].copy(), qs[0].copy(), p0.copy()
+        rest, power, rotated = self._spectra(values)
         if self.spec.lines:
-            if self._transform is None:
-                self._transform = sp.transform(self.y)
             theta, psi, amp = self._line_phasors(values)
-            rest, power = self._rest_without_lines(theta, psi, amp)
         else:
             theta = psi = amp = np.zeros(0)
-            if self._power is None:
-                self._power = sp.reduce(sp.of(self.y))
-            rest, power = None, self._power
         v0 = float(h @ p0 @ h) + r
-        density = sp.density(phi, q, h, r, starts, sizes, stationary_variance=v0)
+        density = sp.density(phi, q, h, r, starts, sizes)
         inverse = sp.group_weights / density
         slope = inverse * (power / density - 1.0)  # d ln L / d f_j
-        ends = 2.0 / sp.m if sp.differences else 0.0  # d f_j / d v0 (every ordinate)
+        jump_b = 0.0  # the shared jump's dC/db (`shared_jump`), and d ln L / d v0 through tau^2 = 2 v0 / m
+        slope_ends = 0.0
+        if rotated is not None:
+            _, d_a, jump_b, d_tau2 = shared_jump(inverse, rotated, 2.0 * v0 / sp.m)
+            slope = slope - 2.0 * (inverse / density) * (d_a + jump_b * rotated)
+            slope_ends = d_tau2 * 2.0 / sp.m
         gain = sp.group_c if sp.differences else np.ones(density.size)  # d f_j / d r
         f0 = sp.zero_density(phi, q, h, r, starts, sizes)
         walk = walk_step_variance(phi, q, h, starts, sizes)
@@ -1030,8 +1026,8 @@ class ModalModel(SignalModel):
             for j in range(self.spec.lines)
             for i, field in enumerate(("frequency", "amplitude", "phase"))
         }
-        # what every parameter's slope shares: sum_j slope_j df_j / d(r, v0)
-        slope_r, slope_ends = dot(slope, np.ascontiguousarray(gain)), ends * float(slope.sum())
+        # what every parameter's slope shares: sum_j slope_j df_j / d r (v0 moves the jump's term alone)
+        slope_r = dot(slope, np.ascontiguousarray(gain))
         term_of = {n: i for i, term_names in enumerate(self._state_names) for n in term_names}
         blocks: dict[int, np.ndarray] = {}  # sum_j slope_j df_j / d entry, per block
 
@@ -1044,8 +1040,13 @@ class ModalModel(SignalModel):
 
         if rest is not None:
             on_ordinates = sp.ordinate_inverse(density, inverse)
-            weighted_re = np.ascontiguousarray(on_ordinates * rest.real)
-            weighted_im = np.ascontiguousarray(on_ordinates * rest.imag)
+            weighted_re = on_ordinates * rest.real
+            weighted_im = on_ordinates * rest.imag
+            if jump_b:  # the jump's term: dC/dx_j = jump_b 2 w_j / f_j, x_j = Re(X_j e^{-i w_j}) / sqrt(m)
+                share = -jump_b * math.sqrt(sp.m) * on_ordinates
+                weighted_re = weighted_re + share * sp.cw
+                weighted_im = weighted_im + share * sp.sw
+            weighted_re, weighted_im = np.ascontiguousarray(weighted_re), np.ascontiguousarray(weighted_im)
             grid = (self.t[-1] - self.t[0]) / (self.t.size - 1)  # `_line_phasors`' theta = 2 pi f grid
         lines: dict[int, np.ndarray] = {}  # d ln L / d (amp, theta / amp, psi / amp), per line
         out: dict[str, float] = {}

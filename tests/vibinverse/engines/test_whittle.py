@@ -12,8 +12,7 @@ import pytest
 from vibinverse.engines.whittle import Periodogram, block_layout, fast_length, lines_sum, spectral_density
 from vibinverse.io.series import Series
 from vibinverse.kalman import oscillator_fill
-from vibinverse.models import modal
-from vibinverse.models.modal import WHITTLE_MIN_SAMPLES, ModalModel, exact_affordable
+from vibinverse.models.modal import WHITTLE_MIN_SAMPLES, ModalModel
 
 
 def tables(dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -223,6 +222,7 @@ def test_steady_stamps_off_one_grid_use_whittle_and_a_dropped_frame_does_not():
     "spec",
     [
         {"modes": 1, "lines": 2, "drift": True},
+        {"modes": 2, "drift": True},  # the end-to-end jump's shared term without lines
         {"modes": 2, "lines": 1, "noise": "ar1"},
         {"modes": 1, "noise": "1/f"},
     ],
@@ -340,19 +340,55 @@ def test_below_a_passband_the_filter_and_whittle_leave_out_the_same_ordinates():
     assert ModalModel({"modal": spec}, plain).above_passband(values) == 0.0
 
 
-def test_the_fit_after_the_search_runs_the_filter_where_it_is_affordable():
-    """`exact_affordable`: a long record's model (Whittle's engine) is fitted by the filter when its
-    fit's filter runs would take EXACT_FIT_SECONDS or less (40,000 samples, one mode: milliseconds a
-    run), not beyond (the allowance cut to a microsecond); `use_filter` turns Whittle's engine off
-    for good (a restart of the engine keeps it off), and the likelihood is the filter's."""
+def test_whittle_runs_on_the_differences_only_for_a_model_with_a_drift():
+    """`whittle_engine`: the record's own periodogram without a drift (the differences' transform
+    carries the stationary part's end-to-end jump in every ordinate), its differences with one (a
+    walk has no periodogram)."""
     series = long_record(4)
-    model = ModalModel({"modal": {"modes": 1, "drift": True}}, series)
-    values = dict(LONG_TRUTH)
-    assert model.spectral is not None and exact_affordable(model, values)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(modal, "EXACT_FIT_SECONDS", 1e-6)
-        assert not exact_affordable(model, values)
-    model.use_filter()
-    model.start_engine()
-    assert model.spectral is None and not exact_affordable(model, values)
-    assert model.log_likelihood(values) == model.exact_log_likelihood(values)
+    still = ModalModel({"modal": {"modes": 1, "drift": False}}, series)
+    walk = ModalModel({"modal": {"modes": 1, "drift": True}}, series)
+    assert still.spectral.differences == 0 and walk.spectral.differences == 1
+
+
+@pytest.mark.slow
+def test_whittle_s_damping_intervals_of_three_close_modes_hold_the_truth_at_their_rate():
+    """Calibration (30 data sets of 40 min at 10 Hz, `building_record`: three modes 1.9-2.7 Hz,
+    damping 1.0-1.5 %, white noise, simulated exactly): `vi.fit`'s 90 % intervals of the damping
+    ratios, by Whittle's likelihood of the record's periodogram (no drift: not the filter), hold the
+    truth at their rate (0.89 +- 0.03 measured over 90), the strongest mode's too (27 of 30). On the
+    differences the strongest mode's held it in 12 of 30. The bounds: 0.83 is 2 standard errors under
+    0.9 (intervals 20 % too narrow cover ~0.81)."""
+    from tests.conftest import BUILDING_MODES, building_record
+    from vibinverse.api import fit
+
+    hits = np.zeros((30, 3), dtype=bool)
+    for k in range(30):
+        result = fit(building_record(700 + k, 2400.0))
+        assert result.approximation == "importance"
+        p = result.summary()["parameters"]
+        for i, (_, zeta, _) in enumerate(BUILDING_MODES):
+            q = p[f"modes[{i}].damping_ratio"]
+            hits[k, i] = q["q05"] <= zeta <= q["q95"]
+    assert 0.83 <= hits.mean() <= 0.98, hits.mean(axis=0)
+    assert hits[:, 0].mean() >= 0.7, hits.mean(axis=0)
+
+
+@pytest.mark.slow
+def test_whittle_with_the_shared_end_to_end_jump_keeps_its_damping_intervals_beside_a_walk():
+    """Calibration with a drift (16 data sets of 40 min, `decimated_building`: the three modes, a
+    walk, white noise, decimated to 10 Hz and fitted below its roll-off): Whittle's likelihood of
+    the differences with the end-to-end jump as one shared term (`shared_jump`) holds the damping
+    ratios at their rate (0.92 +- 0.04 measured over 48; the strongest mode's 15 of 16). With the
+    jump as an independent share of every ordinate: 0.79, the strongest mode's 10 of 16."""
+    from tests.conftest import BUILDING_MODES, decimated_building
+    from vibinverse.api import fit
+
+    hits = np.zeros((16, 3), dtype=bool)
+    for k in range(16):
+        result = fit(decimated_building(100 + k, 2400.0))
+        p = result.summary()["parameters"]
+        for i, (_, zeta, _) in enumerate(BUILDING_MODES):
+            q = p[f"modes[{i}].damping_ratio"]
+            hits[k, i] = q["q05"] <= zeta <= q["q95"]
+    assert 0.8 <= hits.mean() <= 0.99, hits.mean(axis=0)
+    assert hits[:, 0].mean() >= 0.75, hits.mean(axis=0)
