@@ -427,7 +427,9 @@ def regular_grid(t: NDArray[np.float64], ref: float = 0.0) -> tuple[NDArray[np.f
     k = np.arange(m, dtype=np.float64)
     kc = k - k.mean()
     mean = float(t.mean())
-    step = float(np.dot(kc, t - mean) / np.dot(kc, kc))
+    # numpy's pairwise sums, not BLAS's dot, whose threads change its last bits: the beam record's
+    # fit took another order when read under one BLAS thread than under several
+    step = float(np.sum(kc * (t - mean)) / np.sum(kc * kc))
     typical = float(np.median(q))
     start = mean - k.mean() * step
     start = typical * round(start / typical)  # X0 as printed: 0 rather than -1e-17

@@ -360,3 +360,17 @@ def test_fit_without_a_channel_identifies_the_modes_of_all_three(tmp_path):
     assert near and all(len(m["shape"]) == 3 for m in near)
     assert (out / "modes.csv").read_text().startswith("mode,frequency_hz")
     assert (out / "oma.png").stat().st_size > 10_000
+
+
+def test_the_grid_step_is_the_same_whatever_blas_s_threads():
+    """`regular_grid`'s step by numpy's pairwise sums: the same bits under one BLAS thread and
+    several (BLAS's dot changed its last bits with its threads, and the beam record's fit, chaotic
+    in them, took another order in the bench's one-thread processes than at the command line)."""
+    from threadpoolctl import threadpool_limits
+
+    t = np.round(np.arange(88_800) / 7314.2857142857, 6)
+    with threadpool_limits(1):
+        one = regular_grid(t)
+    with threadpool_limits(2):
+        two = regular_grid(t)
+    assert one[1] == two[1] and np.array_equal(one[0], two[0])
