@@ -371,9 +371,11 @@ def whittle_engine(
     by all ordinates; Whittle's likelihood counts it as independent noise in each, weighted most
     where the differenced density is low. On 40 min 10 Hz records of three modes (simulated exactly,
     white noise, no drift) the differences' estimates of the strongest mode's damping ratio spread
-    four times the intervals' sd (two of 30 at a quarter and a half of the truth) and its intervals held the
-    truth in 12 of 30; the record's periodogram's in 27 of 30, all three modes' damping ratios in
-    0.89 +- 0.03 (90 intervals), as with the Kalman filter's exact likelihood (0.90 +- 0.03)."""
+    four times the intervals' sd (two of 30 at a quarter and a half of the truth), and its
+    intervals held the truth in 12 of 30; the record's periodogram's in 27 of 30, all three modes'
+    damping ratios in 0.89 +- 0.03 (90 intervals), as with the Kalman filter's exact likelihood
+    (0.90 +- 0.03). With a drift the jump is one term shared by the ordinates
+    (`vibinverse.engines.whittle.shared_jump`)."""
     short = series.time.size < WHITTLE_MIN_SAMPLES and series.passband is None
     if gaps or gain or integrated or short or not steady(series.time):
         return None
