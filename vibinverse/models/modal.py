@@ -636,7 +636,7 @@ class ModalModel(SignalModel):
         self._full_transform: np.ndarray | None = None  # `above_passband`'s
         # the last lines' periodogram and the last density (with f(0) and the walk's step), each with
         # its key: a finite-difference step moves one parameter, so one of the two is reused
-        self._lines_power: tuple[tuple, np.ndarray, np.ndarray] | None = None
+        self._lines_power: tuple[tuple, np.ndarray, np.ndarray, np.ndarray | None] | None = None
         self._line_parts: dict[tuple[float, float, float], np.ndarray] = {}
         self._density: tuple[bytes, tuple[tuple[np.ndarray, float], float, float]] | None = None
         self._level_window: int | None = None
@@ -932,8 +932,7 @@ class ModalModel(SignalModel):
         if self.spec.lines:
             if self._transform is None:
                 self._transform = sp.transform(self.y)
-            rest, power = self._rest_without_lines(*self._line_phasors(values))
-            return rest, power, sp.reduce(sp.rotated(rest)) if sp.differences else None
+            return self._rest_without_lines(*self._line_phasors(values))
         if self._power is None:  # a constant mean: computed once
             spec = sp.transform(self.y)
             self._power = sp.reduce(sp.power(spec))
@@ -1125,15 +1124,18 @@ class ModalModel(SignalModel):
         phi1[lo:hi, lo:hi], q1[lo:hi, lo:hi], p01[lo:hi, lo:hi] = phis[0], qs[0], p0s
         return phi1, q1, p01, range(first, first + count)
 
-    def _rest_without_lines(self, theta: np.ndarray, psi: np.ndarray, amp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(transform, periodogram) of the record less its lines: each line's transform kept with
+    def _rest_without_lines(
+        self, theta: np.ndarray, psi: np.ndarray, amp: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """(transform, periodogram, `rotated` part or None on the record's own periodogram) of the
+        record less its lines, the last two reduced to the engine's groups: each line's transform kept with
         its values (a finite-difference step moves one line; the others are reused), the last
         result with all of them. The caches are replaced whole, never changed in place: threads
         that evaluate walkers at once may recompute, never mix."""
         keys = tuple(zip(theta.tolist(), psi.tolist(), amp.tolist()))
         cached = self._lines_power
         if cached is not None and cached[0] == keys:
-            return cached[2], cached[1]
+            return cached[2], cached[1], cached[3]
         parts = dict(self._line_parts)
         rest = self._transform.copy()
         for key in keys:
@@ -1146,9 +1148,11 @@ class ModalModel(SignalModel):
         # kept: this call's lines and the last call's (a step and the point it steps from)
         last = cached[0] if cached is not None else ()
         self._line_parts = {k: parts[k] for k in (*last, *keys) if k in parts}
-        power = self.spectral.reduce(self.spectral.power(rest))
-        self._lines_power = (keys, power, rest)
-        return rest, power
+        sp = self.spectral
+        power = sp.reduce(sp.power(rest))
+        rotated = sp.reduce(sp.rotated(rest)) if sp.differences else None
+        self._lines_power = (keys, power, rest, rotated)
+        return rest, power, rotated
 
     def _line_phasors(self, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The lines on the record's grid, a cos(theta k + psi): theta = 2 pi f dt radians per sample
