@@ -58,6 +58,42 @@ def test_density_integrates_to_the_differences_covariances(dt):
     assert (f * np.cos(w)).mean() == pytest.approx(c1, rel=1e-6)
 
 
+def long_double_density(phi: np.ndarray, q: np.ndarray, h: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """A 2 x 2 block's h (zI - Phi)^-1 Q (zI - Phi)^-H h' in extended precision, as written."""
+    ld = np.longdouble
+    z = np.cos(w.astype(ld)) + 1j * np.sin(w.astype(ld))
+    a11, a12, a21, a22 = (ld(x) for x in (phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]))
+    n1, n2 = ld(h[0]) * (z - a22) + ld(h[1]) * a21, ld(h[1]) * (z - a11) + ld(h[0]) * a12
+    num = ld(q[0, 0]) * abs(n1) ** 2 + ld(q[1, 1]) * abs(n2) ** 2 + 2 * ld(q[0, 1]) * (n1 * np.conj(n2)).real
+    return (num / abs((z - a11) * (z - a22) - a12 * a21) ** 2).astype(np.float64)
+
+
+@pytest.mark.parametrize(
+    "hz, zeta, fs, m",
+    [
+        (1 / 3600, 1e-4, 200.0, 720_000),  # one cycle per hour-long record, nearly undamped
+        (1 / 3600, 0.9, 200.0, 720_000),  # ... and nearly critically damped
+        (3.0, 1e-4, 200.0, 720_000),
+        (99.5, 1e-3, 200.0, 720_000),  # next to Nyquist
+        (3.0, 0.99, 200.0, 720_000),
+        (20 / 400, 1e-3, 20.0, 400),
+    ],
+)
+@pytest.mark.parametrize("h", [(1.0, 0.0), (0.0, 1.0), (0.7, -0.3)])
+def test_a_resonance_s_density_is_accurate_on_the_hard_cases(hz, zeta, fs, m, h):
+    """The numerator taken from its least end (`spectral_density`) keeps the density's relative
+    error at the rounding of the denominator's poles: 1e-7 for one cycle per record (the
+    extended-precision value's own cancellation at z ~ 1), 1e-11 elsewhere."""
+    w = 2 * math.pi * np.arange(1, m // 2 + 1) / m
+    phi, q = np.zeros((1, 2, 2)), np.zeros((1, 2, 2))
+    omega = 2 * math.pi * hz
+    oscillator_fill(omega, zeta * omega, 4 * zeta * omega**3, np.array([1 / fs]), phi, q, 0)
+    hh = np.array(h)
+    got = density(phi[0], q[0], hh, 0.0, np.array([0]), np.array([2]), w, diff=0)
+    worst = np.max(np.abs(got / long_double_density(phi[0], q[0], hh, w) - 1))
+    assert worst < (2e-7 if hz * m / fs < 2 else 1e-11)
+
+
 def test_walk_differences_are_white_and_blocks_are_read_from_bounds():
     starts, sizes = block_layout(np.array([0, 1, 1, 3]), np.array([1, 3, 3, 4]))
     assert starts.tolist() == [0, 1, 3] and sizes.tolist() == [1, 2, 1]
