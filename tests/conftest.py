@@ -14,6 +14,9 @@ from pathlib import Path
 # workers cost the suite ~40 % (test_model_order + test_scipy_map on 2 cores: 203 s -> 116 s)
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+# ... and one thread per fit (`vibinverse.parallel.default_workers`) for the same reason: two per fit
+# beside the other workers took the fast suite from 209 s to 271 s on 2 cores
+os.environ.setdefault("VIBINVERSE_WORKERS", "1")
 
 import numpy as np
 import pytest

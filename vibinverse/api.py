@@ -103,7 +103,7 @@ def fit(
     seed: int = 0,
     chain: str | Path | None = None,
     resume: bool = False,
-    workers: int = 1,
+    workers: int | None = None,
     max_steps: int = 20000,
     progress: bool = False,
     pixels: Any = None,
@@ -128,7 +128,8 @@ def fit(
     `chain` is the emcee checkpoint (HDF5; `resume` continues it); without it the sampler
     checkpoints to a temporary file that is removed afterwards. `workers`: the sampler's threads
     (or processes, for a likelihood that holds the GIL) and the modal order search's threads (the
-    same numbers on any count).
+    same numbers on any count); None (default): the cores this process may use, at most 4, as
+    threads (`vibinverse.parallel.default_workers`).
 
     Without a scene (or with a `{"modal": {"modes": 2, ...}}` table) the series is fitted with the
     modal model: resonances, lines, drift and coloured noise, the order not fixed by the table

@@ -17,6 +17,7 @@ from vibinverse.errors import InputError, scene_errors
 from vibinverse.io.scenes import load_scene
 from vibinverse.io.series import Series, load_series
 from vibinverse.models import build_model
+from vibinverse.parallel import default_workers
 from vibinverse.posterior import Posterior
 from vibinverse.priors import Prior, parse_free, parse_prior
 from vibinverse.result import FitResult
@@ -252,20 +253,25 @@ def fit_series(
     seed: int = 0,
     chain: str | Path | None = None,
     resume: bool = False,
-    workers: int = 1,
+    workers: int | None = None,
     max_steps: int = 20000,
     progress: bool = False,
     nuisance: Mapping[str, Any] | None = None,
 ) -> FitResult:
-    """`vibinverse.api.fit` of one series (its docstring has the options)."""
+    """`vibinverse.api.fit` of one series (its docstring has the options). `workers` None: the
+    process's cores as threads (`default_workers`; the sampler of a likelihood that holds the GIL
+    then runs in this process)."""
     from vibinverse.pipeline import check_method, run
 
     check_method(method)  # before the order search, which may take minutes
-    if workers < 1 or max_steps < 1:
+    threads = default_workers() if workers is None else workers
+    if threads < 1 or max_steps < 1:
         raise InputError("workers and max_steps: must be >= 1")
     if resume and chain is None:
         raise InputError("resume: needs the chain (checkpoint) file of the run to continue")
-    post, order, modal = build_posterior(series, scene, free, model, overrides, nuisance, workers)
+    post, order, modal = build_posterior(series, scene, free, model, overrides, nuisance, threads)
+    # processes (a likelihood that holds the GIL) only when asked for
+    sampler = threads if workers is not None or post.model.releases_gil else 1
     with scene_errors(), tempfile.TemporaryDirectory(prefix="vibinverse-") as tmp:
         result = run(
             post,
@@ -273,7 +279,7 @@ def fit_series(
             seed=seed,
             backend=Path(chain) if chain else Path(tmp) / "chain.h5",  # no checkpoint asked for: a temporary one
             resume=resume,
-            workers=workers,
+            workers=sampler,
             max_steps=max_steps,
             progress=progress,
         )

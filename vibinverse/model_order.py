@@ -955,6 +955,7 @@ def settle_swaps(
     rows: list[dict[str, Any]],
     step: int,
     caps: tuple[int, int] = (MAX_MODES, MAX_LINES),
+    workers: int = 1,
 ) -> tuple[OrderFit | None, list[dict[str, Any]]]:
     """Each line and narrow resonance of the chosen order read as the other kind (`swapped`), fitted
     with only the new component, the level, the white noise and the modes near it free, and
@@ -967,10 +968,12 @@ def settle_swaps(
     narrower than that is, over the record, the same steady oscillation as a line, and its damping
     ratio's interval already says how little is known. Each reading is a row of the criterion
     table. After a reading is taken the search goes on, and the next call reads every component
-    again (the unchanged ones too: one partial fit each)."""
+    again (the unchanged ones too: one partial fit each). The readings are independent: `workers`
+    threads fit them (the same numbers as one)."""
     slack = 0.5 * math.log(current.n)
-    readings = []
-    for c, f, as_mode in swapped(current, series, search, caps):
+
+    def read(swap: tuple[Candidate, float, bool]) -> tuple[Candidate, OrderFit, float, bool]:
+        c, f, as_mode = swap
         keep = [*c.new, "level", "noise.sigma", *near_modes(c, current.model.span)]
         alt = fit_order(series, c.spec, c.starts, free=keep, maxiter=60, ftol=1e-9, windows=current.windows)
         bins = bandwidth_bins(alt if as_mode else current, f)
@@ -981,7 +984,10 @@ def settle_swaps(
         if full:
             alt = fit_order(series, c.spec, [alt.values], windows=current.windows)
             bins = bandwidth_bins(alt if as_mode else current, f)
-        readings.append((c, alt, bins, full))
+        return c, alt, bins, full
+
+    readings = thread_map(read, swapped(current, series, search, caps), workers)
+    for c, alt, _, full in readings:
         rows.append(_row(step, c.what, alt, current.bic, "full" if full else "partial", False))
     if not readings:
         return None, []
@@ -1116,7 +1122,12 @@ def decay_readings(fit: OrderFit, series: Series, search: dict[str, bool]) -> li
 
 
 def settle_decays(
-    series: Series, current: OrderFit, search: dict[str, bool], rows: list[dict[str, Any]], step: int
+    series: Series,
+    current: OrderFit,
+    search: dict[str, bool],
+    rows: list[dict[str, Any]],
+    step: int,
+    workers: int = 1,
 ) -> OrderFit | None:
     """Each mode and line whose band decays over the record read as a free decay (`decay_readings`),
     fitted with only the decay, the level, the white noise and the modes near it free; those that
@@ -1127,11 +1138,13 @@ def settle_decays(
     before either is claimed), plus 0.5 ln n (a parameter's BIC price) when its onset lies inside
     the record; the next is then read again from the fit that took it (its candidate nearest in
     frequency), without the whole search in between: a plucked string's five partials, one after
-    the other. Returns the last fit taken, or None. Each reading is a row of the criterion table."""
+    the other. Returns the last fit taken, or None. Each reading is a row of the criterion table.
+    The partial fits run on `workers` threads (the same numbers as one)."""
     slack = 0.5 * math.log(current.n)
     price = lambda a: DECIDED + (slack if a.spec.onset else 0.0)
     frequency = lambda c: c.starts[0][c.new[0]]
-    partial = [(c, partial_fit(series, current, c)) for c in decay_readings(current, series, search)]
+    cands = decay_readings(current, series, search)
+    partial = list(zip(cands, thread_map(lambda c: partial_fit(series, current, c), cands, workers)))
     partial.sort(key=lambda cp: cp[1].log_likelihood - price(cp[1]), reverse=True)
     for c, pf in partial:
         rows.append(_row(step, c.what, pf, current.bic, "partial", False))
@@ -1217,6 +1230,7 @@ def settle_near_lines(
     rows: list[dict[str, Any]],
     step: int,
     caps: tuple[int, int] = (MAX_MODES, MAX_LINES),
+    workers: int = 1,
 ) -> tuple[OrderFit | None, bool, list[tuple[dict[str, Any], OrderFit]]]:
     """A weak line next to a resonance (`near_line_candidates`): the forward step proposes a line at
     the strongest residual peak of the whole band, and a resonance that took in a weak line's power
@@ -1235,8 +1249,9 @@ def settle_near_lines(
     if not search["lines"] or current.spec.lines >= caps[1] or not current.spec.modes:
         return None, False, []
     slack = 0.5 * math.log(current.n)
-    found = []
-    for c, i, (lo, hi) in near_line_candidates(current, series):
+
+    def near(cand: tuple[Candidate, int, tuple[float, float]]) -> tuple[Candidate, int, float, OrderFit, bool]:
+        c, i, (lo, hi) = cand
         ln_m = math.log(band_frequencies((lo, hi), current.model.span))
         windows = (*current.windows, (lo, hi))
         free = [*c.new, "level", "noise.sigma"]
@@ -1244,8 +1259,11 @@ def settle_near_lines(
         full = alt.log_likelihood - current.log_likelihood >= POSSIBLE_GAIN + ln_m - slack
         if full:
             alt = fit_order(series, c.spec, [alt.values], windows=windows)
+        return c, i, ln_m, alt, full
+
+    found = thread_map(near, near_line_candidates(current, series), workers)  # independent: the same numbers
+    for c, _, _, alt, full in found:
         rows.append(_row(step, c.what, alt, current.bic, "full" if full else "partial", False))
-        found.append((c, i, ln_m, alt, full))
     if not found:
         return None, False, []
     best = min(found, key=lambda x: x[3].bic)
@@ -1343,12 +1361,12 @@ def choose_order(
             best = settle_slow(series, current, search, rows, step)
             lowest = FEW_CYCLES
         if best is None:  # ... and is each line not a resonance, each narrow resonance not a line?
-            best, ambiguous = settle_swaps(series, current, search, rows, step, (max_modes, max_lines))
+            best, ambiguous = settle_swaps(series, current, search, rows, step, (max_modes, max_lines), workers)
         if best is None:  # ... and does none of them ring down from one excitation?
-            best = settle_decays(series, current, search, rows, step)
+            best = settle_decays(series, current, search, rows, step, workers)
         final = False
         if best is None:  # ... and has no resonance taken in a weak line next to it?
-            best, final, near = settle_near_lines(series, current, search, rows, step, (max_modes, max_lines))
+            best, final, near = settle_near_lines(series, current, search, rows, step, (max_modes, max_lines), workers)
             ambiguous = [] if best is not None and not final else [*ambiguous, *(e for e, _ in near)]
             readings = {e["alternative"]: f for e, f in near}
         if best is None:

@@ -103,3 +103,37 @@ def test_a_long_record_s_drift_rate_is_held_where_the_filter_set_it_not_given_wh
     for i, m in enumerate(modes):
         p = summary["parameters"][f"modes[{i}].frequency"]
         assert p["q05"] < p["q95"] and p["median"] == pytest.approx(m.frequency, rel=0.01)
+
+
+class _Sampled(Exception):
+    """Raised by a stand-in for the pipeline: the workers it was given."""
+
+
+@pytest.mark.parametrize("gil_free", [True, False])
+@pytest.mark.parametrize("workers", [None, 3])
+def test_a_fit_s_default_workers_are_the_cores_as_threads_and_processes_only_when_asked(monkeypatch, gil_free, workers):
+    """`vi.fit` without `workers`: the order search and a GIL-free sampler on `default_workers()`
+    threads; a likelihood that holds the GIL sampled in this process (a pool of processes only
+    when `workers` is given)."""
+    import vibinverse.fitting as fitting
+    import vibinverse.model_order as model_order
+    import vibinverse.pipeline as pipeline
+    from vibinverse.models.modal import ModalModel
+
+    searched = []
+    order = model_order.choose_order
+    monkeypatch.setattr(model_order, "choose_order", lambda *a, **k: searched.append(k["workers"]) or order(*a, **k))
+    monkeypatch.setattr(fitting, "default_workers", lambda: 2)
+    monkeypatch.setattr(ModalModel, "releases_gil", gil_free)
+
+    def run(post, method, **options):
+        raise _Sampled(options["workers"])
+
+    monkeypatch.setattr(pipeline, "run", run)
+    t = np.arange(400) * 0.05
+    y = np.random.default_rng(0).normal(size=t.size)
+    with pytest.raises(_Sampled) as got:
+        vi.fit(vi.series(t, y), method="map", workers=workers)
+    threads = 2 if workers is None else workers
+    assert searched == [threads]
+    assert got.value.args[0] == (threads if gil_free or workers is not None else 1)

@@ -93,11 +93,14 @@ def test_white_noise_has_no_modes_and_no_lines():
 
 
 def test_the_search_on_two_threads_makes_the_same_choices_and_numbers_as_on_one():
-    """`workers` runs each step's candidates on threads (`_best_move`): the criterion table, the
-    order and the optimum are those of one thread, to the last digit."""
+    """`workers` runs each step's candidates on threads (`_best_move`), and the last step's readings
+    (a line as a resonance, a resonance as a free decay, a line next to a resonance): the criterion
+    table, the order and the optimum are those of one thread, to the last digit."""
     t, y = simulate(3000, modes=[(1.3, 0.02, 1.0), (4.1, 0.01, 0.5)], lines=[(7.0, 0.4, 0.3)], sigma=0.6, seed=8)
     one, two = (choose_order(vi.series(t, y), workers=w) for w in (1, 2))
     assert two.spec == one.spec and two.spec.modes == 2 and two.spec.lines == 1
+    tried = " | ".join(r["tried"] for r in two.criterion)
+    assert all(what in tried for what in ("read as a resonance", "read as a free decay", "next to the resonance"))
     assert json.dumps(two.criterion, sort_keys=True) == json.dumps(one.criterion, sort_keys=True)
     assert two.fit.values == one.fit.values
 

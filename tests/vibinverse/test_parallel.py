@@ -4,7 +4,8 @@ import threading
 
 import pytest
 
-from vibinverse.parallel import thread_map
+from vibinverse.errors import InputError
+from vibinverse.parallel import MAX_DEFAULT_WORKERS, WORKERS_VARIABLE, default_workers, thread_map
 
 
 def test_results_keep_the_items_order_on_several_threads():
@@ -34,3 +35,24 @@ def test_an_exception_in_a_thread_is_raised_to_the_caller():
 
     with pytest.raises(ValueError, match="three"):
         thread_map(fail_on_three, range(6), workers=2)
+
+
+def test_a_fit_s_default_threads_are_the_process_s_cores_up_to_the_cap(monkeypatch):
+    monkeypatch.delenv(WORKERS_VARIABLE, raising=False)
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: {0, 1, 2, 3, 4, 5, 6, 7, 8, 9}, raising=False)
+    assert default_workers() == MAX_DEFAULT_WORKERS
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: {3}, raising=False)
+    assert default_workers() == 1
+    monkeypatch.delattr("os.sched_getaffinity", raising=False)
+    monkeypatch.setattr("os.cpu_count", lambda: None)
+    assert default_workers() == 1
+
+
+@pytest.mark.parametrize("told, threads", [("3", 3), (" 1 ", 1), ("0", None), ("two", None), ("-2", None)])
+def test_the_environment_sets_a_fit_s_default_threads_or_is_refused_in_one_line(monkeypatch, told, threads):
+    monkeypatch.setenv(WORKERS_VARIABLE, told)
+    if threads is None:
+        with pytest.raises(InputError, match=rf"^{WORKERS_VARIABLE}: .*allowed: an integer >= 1$"):
+            default_workers()
+    else:
+        assert default_workers() == threads

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing as mp
+import os
 import time
 from collections import deque
 from collections.abc import Callable, Generator, Sequence
@@ -38,11 +39,13 @@ class StepResult:
     error: str = ""
 
 
-def _child(conn: Any, fn: Callable[..., dict[str, Any]], args: tuple) -> None:
+def _child(conn: Any, fn: Callable[..., dict[str, Any]], args: tuple, threads: int) -> None:
     from threadpoolctl import threadpool_limits
 
     from vibinverse.bench.robustness_fit import quiet
+    from vibinverse.parallel import WORKERS_VARIABLE
 
+    os.environ.setdefault(WORKERS_VARIABLE, str(threads))  # its share of the cores, unless the user set it
     t0 = time.perf_counter()
     try:
         with threadpool_limits(1), quiet():
@@ -62,7 +65,10 @@ def run_jobs(jobs: Sequence[Job], workers: int = 1) -> list[list[dict[str, Any]]
     """Run each job (a generator that yields Steps, is sent their StepResults and returns its rows),
     at most `workers` steps at once, each in a forked process killed at its limit; a job's next
     step goes ahead of the jobs not started. Returns each job's rows, in order."""
+    from vibinverse.parallel import available_cores
+
     ctx = mp.get_context("fork")
+    threads = max(1, available_cores() // max(1, workers))  # each step's share of the cores
     results: list[list[dict[str, Any]]] = [[] for _ in jobs]
     ready: deque[tuple[int, Step]] = deque()
     running: dict[Any, tuple[int, Step, Any, float]] = {}
@@ -81,7 +87,7 @@ def run_jobs(jobs: Sequence[Job], workers: int = 1) -> list[list[dict[str, Any]]
         while ready and len(running) < max(1, workers):
             i, step = ready.popleft()
             recv, send = ctx.Pipe(duplex=False)
-            proc = ctx.Process(target=_child, args=(send, step.fn, step.args), daemon=True)
+            proc = ctx.Process(target=_child, args=(send, step.fn, step.args, threads), daemon=True)
             proc.start()
             send.close()
             running[recv] = (i, step, proc, time.perf_counter())

@@ -274,7 +274,7 @@ def cmd_fit(args: argparse.Namespace) -> dict[str, Any]:
     from vibinverse.cli import fit_cube as cube_fit
     from vibinverse.priors import parse_free
 
-    if args.workers < 1 or args.max_steps < 1:
+    if (args.workers is not None and args.workers < 1) or args.max_steps < 1:
         raise InputError("--workers and --max-steps: must be >= 1")
     if args.pixels is None and args.scene is None:  # several channels: operational modal analysis
         cube_fit.check_series_options(args, allow=("band",))  # a multi-channel fit takes --band too
@@ -846,9 +846,10 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument(
         "--workers",
         type=ranges.workers,
-        default=1,
+        default=None,
         help="the sampler's workers: threads where the likelihood releases the GIL (frame, modal), else "
-        "processes; also the modal order search's threads (each step's candidates)",
+        "processes; also the modal order search's threads (each step's candidates). Default: this "
+        "process's cores, at most 4, as threads (the same numbers on any count)",
     )
     fit.add_argument(
         "--max-steps", type=ranges.max_steps, default=20000, help=f"cap on MCMC steps, in [1, {ranges.MAX_STEPS}]"

@@ -15,9 +15,12 @@ number (1 / sum w^2, Kish) must reach the sampler's ESS_MIN. Where k passes and 
 number falls short, the effective fraction is the proposal's, so more draws of it reach ESS_MIN:
 up to MAX_DRAWS_FACTOR times those asked for, i.e. where the first ones are at least ~10 %
 effective (below that the proposal misses the posterior's shape: a second mode it reaches only in
-its tail). Of 160 draws of examples/modal_calibration.py 18 had gone to emcee (the 8 among the
-first 60 each with k < 0.7 and 313-399 effective draws of 2000); topped up, 159 pass, with the
-same coverage. Then the draws resampled by their smoothed weights are the posterior draws: each
+its tail). The first FIRST_DRAWS (500) are weighed first: where under a quarter of that 10 % are
+effective, the rest are not weighed and the check fails at once (the LIGO strain's 32 s: 33
+effective of 2000, ~10 s of likelihoods spent to learn it). Of 160 draws of
+examples/modal_calibration.py 18 had gone to emcee (the 8 among the first 60 each with k < 0.7
+and 313-399 effective draws of 2000); topped up, 159 pass, with the same coverage. Then the
+draws resampled by their smoothed weights are the posterior draws: each
 call is independent, so N draws cost N likelihood calls (2000 on a one-hour record at 200 Hz:
 ~20-40 s), where emcee's walkers need thousands of dependent steps (on that record without
 sensor noise, sigma's skewed posterior held emcee's acceptance at 14 % and its autocorrelation
@@ -48,6 +51,10 @@ KHAT_MAX = 0.7
 #: at most this many times the draws asked for, drawn when the weights pass the Pareto check but
 #: their effective number falls short of ESS_MIN
 MAX_DRAWS_FACTOR = 2
+#: the draws weighed first (`LaplaceImportance`): when their effective fraction is below HOPELESS of
+#: the fraction that could pass (ESS_MIN of the cap), the rest are not weighed
+FIRST_DRAWS = 500
+HOPELESS = 0.25
 
 
 def psis_weights(log_w: np.ndarray) -> tuple[float, np.ndarray, float]:
@@ -103,9 +110,21 @@ class LaplaceImportance(Estimator):
         logger.debug("importance sampling: split-t scales %s", np.round(scales, 2).tolist())
         rng = np.random.default_rng(seed)
         zs = proposal.draw(draws, rng)
-        log_w = log_posteriors(posterior, zs, workers) - proposal.log_density(zs)
-        khat, weights, ess = psis_weights(log_w)
         cap = MAX_DRAWS_FACTOR * draws
+        first = min(FIRST_DRAWS, draws)
+        log_w = log_posteriors(posterior, zs[:first], workers) - proposal.log_density(zs[:first])
+        if first < draws:  # the first draws say whether the rest can help (the same draws either way)
+            khat, _, ess = psis_weights(log_w)
+            logger.debug("importance sampling: Pareto k %.2f, %.0f effective of the first %d draws", khat, ess, first)
+            if ess / first < HOPELESS * ESS_MIN / cap:
+                raise Unsupported(
+                    f"the Laplace approximation fails its importance check (effective draws {ess:.0f} of the "
+                    f"first {first}: the {cap} draws allowed would hold ~{ess / first * cap:.0f}, "
+                    f"needs >= {ESS_MIN:.0f})"
+                )
+            rest = zs[first:]
+            log_w = np.concatenate([log_w, log_posteriors(posterior, rest, workers) - proposal.log_density(rest)])
+        khat, weights, ess = psis_weights(log_w)
         if khat < KHAT_MAX and ess < ESS_MIN and ess > 0 and ESS_MIN / ess * zs.shape[0] <= cap:
             # trustworthy weights, too few of them: the effective fraction ess / n is the proposal's,
             # so more draws of it reach ESS_MIN (with a margin for the fraction's own noise)

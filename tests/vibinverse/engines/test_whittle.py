@@ -427,3 +427,58 @@ def test_whittle_with_the_shared_end_to_end_jump_keeps_its_damping_intervals_bes
     hits = damping_hits(decimated_building(100 + k, 2400.0) for k in range(16))
     assert 0.8 <= hits.mean() <= 0.99, hits.mean(axis=0)
     assert hits[:, 0].mean() >= 0.75, hits.mean(axis=0)
+
+
+@pytest.mark.parametrize("m", [400, 4001, 131_072])
+@pytest.mark.parametrize("where", [0.509, 100.0, 100.0 + 1e-9, 7.0 + 3e-7, 1e-9, "nyquist", "beside nyquist"])
+@pytest.mark.parametrize("diff", [0, 1])
+def test_a_line_s_vectorized_transform_and_slope_are_its_ordinate_by_ordinate_values(m, where, diff):
+    """`line_transform` and `line_gradient` (each ordinate by its quotient in a loop without a
+    branch, the few next to a pole again) equal `transform_at` and `gradient_at` taken at every
+    ordinate and summed in order, to the last bit: lines between ordinates, on one, 1e-9 of a bin
+    beside one, next to zero and at or beside Nyquist."""
+    from vibinverse.engines.whittle import (
+        gradient_at,
+        gradient_coefficients,
+        line_gradient,
+        line_transform,
+        transform_at,
+        transform_coefficients,
+    )
+
+    nj = m // 2
+    w = 2 * math.pi * np.arange(1, nj + 1) / m
+    cw, sw = np.cos(w), np.sin(w)
+    bins = {"nyquist": m / 2, "beside nyquist": m / 2 - 1e-9}.get(where, where)
+    theta = 0.509 if where == 0.509 else 2 * math.pi * float(bins) / m
+    psi, amp = 0.3, 1.3
+    got = np.empty(nj, dtype=np.complex128)
+    line_transform(cw, sw, m, diff, theta, psi, amp, got)
+    k = transform_coefficients(m, diff, theta, psi, amp)
+    want = np.array([complex(*transform_at(j, cw, sw, m, theta, *k)) for j in range(nj)])
+    assert np.array_equal(got, want)
+    rng = np.random.default_rng(3)
+    wre, wim = rng.normal(size=nj), rng.normal(size=nj)
+    slope = np.empty(3)
+    line_gradient(cw, sw, m, diff, theta, psi, wre, wim, slope)
+    k = gradient_coefficients(m, diff, theta, psi)
+    g0 = gt = gp = 0.0
+    for j in range(nj):
+        a, b, p0, p1 = gradient_at(j, cw, sw, m, theta, wre, wim, k)
+        gp += p0
+        gp += p1
+        g0 += a
+        gt += b
+    assert np.array_equal(slope, [g0, gt, gp])
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 17, 360_001])
+def test_whittle_s_dot_is_the_sum_of_products_to_rounding_at_every_length(n):
+    """`dot`'s eight running sums and its tail of n mod 8 terms: the exact sum (extended precision)
+    to within n ulps of the sum of magnitudes."""
+    from vibinverse.engines.whittle import dot
+
+    rng = np.random.default_rng(n)
+    a, b = rng.normal(size=n), rng.normal(size=n)
+    exact = float(np.sum(a.astype(np.longdouble) * b.astype(np.longdouble)))
+    assert abs(dot(a, b) - exact) <= max(n, 1) * np.finfo(float).eps * float(np.sum(np.abs(a * b)) + 1e-300)

@@ -140,6 +140,22 @@ def test_a_missed_mode_is_refused():
             importance(two_modes(0.3), [0.0, 0.0], np.eye(2), seed=seed)
 
 
+def test_weights_hopeless_on_the_first_draws_are_refused_without_weighing_the_rest():
+    """The Laplace approximation 3 sd off a narrow posterior (sd 0.2 of the approximation's): of
+    the first FIRST_DRAWS (500) a handful are effective, far under a quarter of the 10 % that could
+    pass (ESS_MIN of the 4000 draws allowed), so the other 1500 are not weighed and the check
+    refuses at once."""
+    from vibinverse.estimators.importance import FIRST_DRAWS
+
+    calls = []
+    target = Target(lambda z: -0.5 * np.sum(((z - 3.0) / 0.2) ** 2))
+    weigh = target.log_posterior
+    target.log_posterior = lambda z: calls.append(1) or weigh(z)
+    with pytest.raises(Unsupported, match=rf"effective draws \d+ of the first {FIRST_DRAWS}"):
+        importance(target, [0.0, 0.0], np.eye(2))
+    assert FIRST_DRAWS < len(calls) < FIRST_DRAWS + 200  # the split-t's scales cost a few dozen more
+
+
 def test_a_second_mode_the_split_t_reaches_gets_its_share():
     """Two equal modes 8 sd apart, the Laplace approximation at one: the split-t's scale on the far
     side (`split_scales`) reaches the other, 2000 draws give ~310 effective, ~1000 more reach
