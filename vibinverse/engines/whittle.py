@@ -334,6 +334,22 @@ def gradient_at(j, cw, sw, m, theta, wre, wim, k):  # pragma: no cover - compile
     return wre[j] * tr + wim[j] * ti, wre[j] * ttr + wim[j] * tti, share[0], share[1]
 
 
+@njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
+def half_quotient(c, s, er, ei, nr, ni, dr, di):  # pragma: no cover - compiled
+    """One sign's X = N / Q and dX / d (s theta) = (dN - X dQ) / Q at the ordinate (cos w, sin w) =
+    (c, s), Q = 1 - e^{i s theta} e^{-i w} (e^{i s theta} = er + i ei, N = nr + i ni, dN = dr + i di,
+    dQ = i (Q - 1)): (Re X, Im X, Re dX, Im dX); inf on the pole (`line_gradient` redoes it)."""
+    qr = 1.0 - (er * c + ei * s)
+    qi = -(ei * c - er * s)
+    inv = 1.0 / (qr * qr + qi * qi)
+    xr = (nr * qr + ni * qi) * inv
+    xi = (ni * qr - nr * qi) * inv
+    dqr, dqi = -qi, qr - 1.0
+    ur = dr - (xr * dqr - xi * dqi)
+    ui = di - (xr * dqi + xi * dqr)
+    return xr, xi, (ur * qr + ui * qi) * inv, (ui * qr - ur * qi) * inv
+
+
 @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 def line_gradient(cw, sw, m, diff, theta, psi, wre, wim, out):  # pragma: no cover - compiled
     """For the unit line cos(theta k + psi) (`line_transform` with amp 1, X_j its transform):
@@ -354,29 +370,11 @@ def line_gradient(cw, sw, m, diff, theta, psi, wre, wim, out):  # pragma: no cov
     terms = np.empty((4, nj))  # per ordinate: w . X, w . dX / d theta, the psi slope's share per sign
     for j in range(nj):
         c, s = cw[j], sw[j]
-        qr = 1.0 - (e0r * c + e0i * s)  # sign +1
-        qi = -(e0i * c - e0r * s)
-        inv = 1.0 / (qr * qr + qi * qi)  # inf on a pole: that ordinate is done again below
-        xr = (n0r * qr + n0i * qi) * inv
-        xi = (n0i * qr - n0r * qi) * inv
-        dqr, dqi = -qi, qr - 1.0
-        ur = d0r - (xr * dqr - xi * dqi)
-        ui = d0i - (xr * dqi + xi * dqr)
-        dxr = (ur * qr + ui * qi) * inv
-        dxi = (ui * qr - ur * qi) * inv
+        xr, xi, dxr, dxi = half_quotient(c, s, e0r, e0i, n0r, n0i, d0r, d0i)  # sign +1
         tr, ti = 0.0 + xr, 0.0 + xi
         ttr, tti = 0.0 + 1.0 * dxr, 0.0 + 1.0 * dxi
         terms[2, j] = 1.0 * (-wre[j] * xi + wim[j] * xr)
-        qr = 1.0 - (e1r * c + e1i * s)  # sign -1
-        qi = -(e1i * c - e1r * s)
-        inv = 1.0 / (qr * qr + qi * qi)
-        xr = (n1r * qr + n1i * qi) * inv
-        xi = (n1i * qr - n1r * qi) * inv
-        dqr, dqi = -qi, qr - 1.0
-        ur = d1r - (xr * dqr - xi * dqi)
-        ui = d1i - (xr * dqi + xi * dqr)
-        dxr = (ur * qr + ui * qi) * inv
-        dxi = (ui * qr - ur * qi) * inv
+        xr, xi, dxr, dxi = half_quotient(c, s, e1r, e1i, n1r, n1i, d1r, d1i)  # sign -1
         tr += xr
         ti += xi
         ttr += -1.0 * dxr
