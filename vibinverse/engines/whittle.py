@@ -141,18 +141,27 @@ def transform_coefficients(m, diff, theta, psi, amp):  # pragma: no cover - comp
     return cre, cim, nre, nim, ere, eim
 
 
-@njit(cache=True, fastmath=False, nogil=True)
+@njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
+def half_sum(c, s, er, ei, nr, ni):  # pragma: no cover - compiled
+    """One sign's geometric sum N / Q at the ordinate (cos w, sin w) = (c, s), Q = 1 - e^{i s theta}
+    e^{-i w} (e^{i s theta} = er + i ei, N = nr + i ni): (Re, Im, |Q|^2); inf on the pole, where
+    |Q|^2 is 0 (`transform_at` then takes the sines)."""
+    qr = 1.0 - (er * c + ei * s)
+    qi = -(ei * c - er * s)
+    den = qr * qr + qi * qi
+    return (nr * qr + ni * qi) / den, (ni * qr - nr * qi) / den, den
+
+
+@njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 def transform_at(j, cw, sw, m, theta, cre, cim, nre, nim, ere, eim):  # pragma: no cover - compiled
     """`line_transform` at ordinate j, each half by its geometric sum or, within 1e-7 of its pole, by
     its sines: (real, imaginary)."""
     tr, ti = 0.0, 0.0
     for s in range(2):
-        qr = 1.0 - (ere[s] * cw[j] + eim[s] * sw[j])  # 1 - e^{i s theta} e^{-i w_j}
-        qi = -(eim[s] * cw[j] - ere[s] * sw[j])
-        den = qr * qr + qi * qi
+        xr, xi, den = half_sum(cw[j], sw[j], ere[s], eim[s], nre[s], nim[s])
         if den > 1e-14:
-            tr += (nre[s] * qr + nim[s] * qi) / den
-            ti += (nim[s] * qr - nre[s] * qi) / den
+            tr += xr
+            ti += xi
         else:  # on (or next to) the ordinate: the sum by its sines
             sg = 1.0 if s == 0 else -1.0
             d = sg * theta - 2.0 * math.pi * (j + 1) / m
@@ -183,17 +192,10 @@ def line_transform(cw, sw, m, diff, theta, psi, amp, out):  # pragma: no cover -
     nj = out.shape[0]
     for j in range(nj):
         c, s = cw[j], sw[j]
-        qr = 1.0 - (e0r * c + e0i * s)
-        qi = -(e0i * c - e0r * s)
-        den = qr * qr + qi * qi  # 0 on a pole: that ordinate is done again below
-        tr = 0.0 + (n0r * qr + n0i * qi) / den
-        ti = 0.0 + (n0i * qr - n0r * qi) / den
-        qr = 1.0 - (e1r * c + e1i * s)
-        qi = -(e1i * c - e1r * s)
-        den = qr * qr + qi * qi
-        tr += (n1r * qr + n1i * qi) / den
-        ti += (n1i * qr - n1r * qi) / den
-        out[j] = complex(tr, ti)
+        xr, xi, _ = half_sum(c, s, e0r, e0i, n0r, n0i)  # inf on a pole: that ordinate is done again below
+        tr, ti = 0.0 + xr, 0.0 + xi
+        xr, xi, _ = half_sum(c, s, e1r, e1i, n1r, n1i)
+        out[j] = complex(tr + xr, ti + xi)
     reach = pole_reach(m)
     for s in range(2):
         k = pole_ordinate(theta, 1.0 if s == 0 else -1.0, m)
@@ -282,7 +284,25 @@ def gradient_coefficients(m, diff, theta, psi):  # pragma: no cover - compiled
     return cre, cim, dare, daim, nre, nim, dnre, dnim, ere, eim
 
 
-@njit(cache=True, fastmath=False, nogil=True)
+@njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
+def half_quotient(c, s, er, ei, nr, ni, dr, di):  # pragma: no cover - compiled
+    """One sign's X = N / Q and dX / d (s theta) = (dN - X dQ) / Q at the ordinate (cos w, sin w) =
+    (c, s), Q = 1 - e^{i s theta} e^{-i w} (e^{i s theta} = er + i ei, N = nr + i ni, dN = dr + i di,
+    dQ = i (Q - 1)): (Re X, Im X, Re dX, Im dX, |Q|^2); inf on the pole, where |Q|^2 is 0
+    (`gradient_at` then takes the sines)."""
+    qr = 1.0 - (er * c + ei * s)
+    qi = -(ei * c - er * s)
+    den = qr * qr + qi * qi
+    inv = 1.0 / den
+    xr = (nr * qr + ni * qi) * inv
+    xi = (ni * qr - nr * qi) * inv
+    dqr, dqi = -qi, qr - 1.0
+    ur = dr - (xr * dqr - xi * dqi)
+    ui = di - (xr * dqi + xi * dqr)
+    return xr, xi, (ur * qr + ui * qi) * inv, (ui * qr - ur * qi) * inv, den
+
+
+@njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 def gradient_at(j, cw, sw, m, theta, wre, wim, k):  # pragma: no cover - compiled
     """`line_gradient`'s terms at ordinate j (k: `gradient_coefficients`), each half by its quotient
     or, within 1e-7 of its pole, by its sines: (w . X, w . dX / d theta, and the psi slope's share
@@ -292,19 +312,8 @@ def gradient_at(j, cw, sw, m, theta, wre, wim, k):  # pragma: no cover - compile
     share = np.empty(2)
     for s in range(2):
         sg = 1.0 if s == 0 else -1.0
-        qr = 1.0 - (ere[s] * cw[j] + eim[s] * sw[j])
-        qi = -(eim[s] * cw[j] - ere[s] * sw[j])
-        den = qr * qr + qi * qi
-        if den > 1e-14:
-            inv = 1.0 / den
-            xr = (nre[s] * qr + nim[s] * qi) * inv
-            xi = (nim[s] * qr - nre[s] * qi) * inv
-            dqr, dqi = -qi, qr - 1.0  # dQ = i (Q - 1)
-            ur = dnre[s] - (xr * dqr - xi * dqi)
-            ui = dnim[s] - (xr * dqi + xi * dqr)
-            dxr = (ur * qr + ui * qi) * inv
-            dxi = (ui * qr - ur * qi) * inv
-        else:  # on (or next to) the ordinate: X = A K(d), d = s theta - w_j
+        xr, xi, dxr, dxi, den = half_quotient(cw[j], sw[j], ere[s], eim[s], nre[s], nim[s], dnre[s], dnim[s])
+        if not den > 1e-14:  # on (or next to) the ordinate: X = A K(d), d = s theta - w_j
             d = sg * theta - 2.0 * math.pi * (j + 1) / m
             d = d - 2.0 * math.pi * round(d / (2.0 * math.pi))
             half = math.sin(0.5 * d)
@@ -334,22 +343,6 @@ def gradient_at(j, cw, sw, m, theta, wre, wim, k):  # pragma: no cover - compile
     return wre[j] * tr + wim[j] * ti, wre[j] * ttr + wim[j] * tti, share[0], share[1]
 
 
-@njit(cache=True, fastmath=False, nogil=True, inline="always", error_model="numpy")
-def half_quotient(c, s, er, ei, nr, ni, dr, di):  # pragma: no cover - compiled
-    """One sign's X = N / Q and dX / d (s theta) = (dN - X dQ) / Q at the ordinate (cos w, sin w) =
-    (c, s), Q = 1 - e^{i s theta} e^{-i w} (e^{i s theta} = er + i ei, N = nr + i ni, dN = dr + i di,
-    dQ = i (Q - 1)): (Re X, Im X, Re dX, Im dX); inf on the pole (`line_gradient` redoes it)."""
-    qr = 1.0 - (er * c + ei * s)
-    qi = -(ei * c - er * s)
-    inv = 1.0 / (qr * qr + qi * qi)
-    xr = (nr * qr + ni * qi) * inv
-    xi = (ni * qr - nr * qi) * inv
-    dqr, dqi = -qi, qr - 1.0
-    ur = dr - (xr * dqr - xi * dqi)
-    ui = di - (xr * dqi + xi * dqr)
-    return xr, xi, (ur * qr + ui * qi) * inv, (ui * qr - ur * qi) * inv
-
-
 @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
 def line_gradient(cw, sw, m, diff, theta, psi, wre, wim, out):  # pragma: no cover - compiled
     """For the unit line cos(theta k + psi) (`line_transform` with amp 1, X_j its transform):
@@ -370,11 +363,11 @@ def line_gradient(cw, sw, m, diff, theta, psi, wre, wim, out):  # pragma: no cov
     terms = np.empty((4, nj))  # per ordinate: w . X, w . dX / d theta, the psi slope's share per sign
     for j in range(nj):
         c, s = cw[j], sw[j]
-        xr, xi, dxr, dxi = half_quotient(c, s, e0r, e0i, n0r, n0i, d0r, d0i)  # sign +1
+        xr, xi, dxr, dxi, _ = half_quotient(c, s, e0r, e0i, n0r, n0i, d0r, d0i)  # sign +1
         tr, ti = 0.0 + xr, 0.0 + xi
         ttr, tti = 0.0 + 1.0 * dxr, 0.0 + 1.0 * dxi
         terms[2, j] = 1.0 * (-wre[j] * xi + wim[j] * xr)
-        xr, xi, dxr, dxi = half_quotient(c, s, e1r, e1i, n1r, n1i, d1r, d1i)  # sign -1
+        xr, xi, dxr, dxi, _ = half_quotient(c, s, e1r, e1i, n1r, n1i, d1r, d1i)  # sign -1
         tr += xr
         ti += xi
         ttr += -1.0 * dxr
